@@ -1,0 +1,1 @@
+"""Navmesh baking, exact shortest paths, geodesic distance fields, motion on the surface."""

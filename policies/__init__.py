@@ -1,0 +1,1 @@
+"""Navigation policies behind one contract (see `policies.base`)."""

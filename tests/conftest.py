@@ -1,0 +1,26 @@
+"""Shared fixtures: real data from ../shared/data and small generated scenes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("WANDERLAND_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+@pytest.fixture(autouse=True)
+def _deterministic_torch():
+    torch.manual_seed(0)
+    torch.set_num_threads(min(2, os.cpu_count() or 1))
+    yield
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real test data beside the checkout. Missing data is a failure, not a skip."""
+    assert SHARED_DATA.is_dir(), f"real test data not found at {SHARED_DATA} (set WANDERLAND_SHARED_DATA)"
+    return SHARED_DATA

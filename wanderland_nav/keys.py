@@ -1,0 +1,113 @@
+"""Every TensorDict key the environment, the policies and the trainer exchange.
+
+Defined once here so that `envs/`, `policies/` and `train.py` never spell a key twice.
+
+Frames
+------
+* **nav frame**: the scene's native frame rotated so that gravity points along -z (z up),
+  metres. Derived from the scene's recorded up axis by `geometry.nav_from_scene_rotation`.
+* **body frame**: the agent's own frame on the ground: x forward, y left, z up, origin at
+  the agent's feet. This is the frame CityWalker, NoMaD and MBRA predict waypoints in.
+
+Shapes below leave out the batch dimensions `[*B]` (the env's `batch_size`, usually `[B]`).
+"""
+
+# --------------------------------------------------------------------------- observations
+RGB = "rgb"
+"""uint8 `[T, H, W, 3]`: the last T camera frames, oldest first; index -1 is the current frame."""
+
+DEPTH = "depth"
+"""float32 `[T, H, W, 1]`: z-depth (metres along the optical axis) for the frames in `RGB`;
+only present when the env is built with depth enabled. 0 where nothing was hit."""
+
+PAST_POSITIONS = "past_positions"
+"""float32 `[T, 2]`: the agent's positions at the times of the `RGB` frames, in the current
+body frame (x forward, y left), metres; index -1 is always (0, 0)."""
+
+GOAL_VECTOR = "goal_vector"
+"""float32 `[2]`: the goal position in the current body frame (x forward, y left), metres."""
+
+GOAL_POSE = "goal_pose"
+"""float32 `[4]`: MBRA/LogoNav pose goal `[x, y, cos(dyaw), sin(dyaw)]` in the body frame, where
+dyaw is the heading of the expert path's last segment relative to the agent's heading."""
+
+GOAL_IMAGE = "goal_image"
+"""uint8 `[H, W, 3]`: the view at the goal (image-goal episodes); zeros when the episode has none."""
+
+HAS_GOAL_IMAGE = "has_goal_image"
+"""bool `[1]`: whether `GOAL_IMAGE` holds a real goal view (NoMaD's goal mask is its negation)."""
+
+INSTRUCTION_TOKENS = "instruction_tokens"
+"""int64 `[L]`: the episode's instruction as UTF-8 bytes + 1, right-padded with 0 (no tokenizer needed)."""
+
+EPISODE_INDEX = "episode_index"
+"""int64 `[1]`: index of the running episode in the env's episode list."""
+
+STEP_COUNT = "step_count"
+"""int64 `[1]`: control steps taken in the running episode."""
+
+# --------------------------------------------------------------------------- privileged state
+AGENT_POSITION = "agent_position"
+"""float32 `[3]`: agent position (feet) in the nav frame, metres. Privileged: experts and logging."""
+
+AGENT_YAW = "agent_yaw"
+"""float32 `[1]`: agent heading in the nav frame, radians, counter-clockwise from +x."""
+
+DISTANCE_TO_GOAL = "distance_to_goal"
+"""float32 `[1]`: geodesic distance from the agent to the goal on the navmesh, metres."""
+
+# --------------------------------------------------------------------------- actions
+ACTION = "action"
+"""float32: `[K, 2]` body-frame waypoints (x forward, y left, metres) in waypoint mode, or `[2]`
+`(v [m/s], omega [rad/s])` in velocity mode."""
+
+WAYPOINTS = "waypoints"
+"""float32 `[K, 2]`: a policy's deterministic (mean) waypoint prediction in the body frame."""
+
+ARRIVAL_LOGIT = "arrival_logit"
+"""float32 `[1]`: CityWalker-style logit that the agent has arrived."""
+
+# --------------------------------------------------------------------------- PPO
+LOC = "loc"
+"""float32, shape of `ACTION`: mean of the Gaussian action distribution."""
+
+SCALE = "scale"
+"""float32, shape of `ACTION`: standard deviation of the Gaussian action distribution."""
+
+ACTION_LOG_PROB = "action_log_prob"
+"""float32 `[]`: log-probability of `ACTION` under the behaviour policy (summed over action dims)."""
+
+STATE_VALUE = "state_value"
+"""float32 `[1]`: the value head's estimate."""
+
+# --------------------------------------------------------------------------- step outputs
+REWARD = "reward"
+"""float32 `[1]`: +R_succ on success, -R_fail on intervention, else -alpha + beta * (d_{t-1} - d_t)."""
+
+DONE = "done"
+TERMINATED = "terminated"
+TRUNCATED = "truncated"
+"""bool `[1]` each, TorchRL's convention: done = terminated | truncated; truncated = timeout."""
+
+SUCCESS = "success"
+"""bool `[1]`: the episode ended within the goal radius."""
+
+INTERVENTION = "intervention"
+"""bool `[1]`: the episode ended by intervention (stuck, no progress, left the navigable region)."""
+
+COLLISION = "collision"
+"""bool `[1]`: this step's motion was blocked or deflected by the navmesh boundary."""
+
+RESET = "_reset"
+"""bool `[1]`: TorchRL's partial-reset mask."""
+
+OBSERVATION_KEYS = (
+    RGB,
+    PAST_POSITIONS,
+    GOAL_VECTOR,
+    GOAL_POSE,
+    GOAL_IMAGE,
+    HAS_GOAL_IMAGE,
+    INSTRUCTION_TOKENS,
+)
+"""Keys every policy may read (plus `DEPTH` when enabled). Privileged keys are not in this list."""
