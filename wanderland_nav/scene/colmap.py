@@ -244,7 +244,7 @@ class _BinReader:
         (n,) = self.unpack("Q", what)
         left = len(self.buf) - self.off
         if n * min_record_bytes > left:
-            raise ColmapFormatError(f"{self.path}: corrupt {what} = {n} (only {left} bytes follow)")
+            raise ColmapFormatError(f"{self.path}: truncated or corrupt: {what} = {n} but only {left} bytes follow")
         return int(n)
 
 
