@@ -1,0 +1,301 @@
+"""Expert episodes for one prepared scene: sample -> shortest paths -> dense paths -> images -> text.
+
+`generate_episodes(scene, navmesh, ...)` is the pure library step (returns episodes + a summary);
+`write_scene_episodes(...)` adds the file side: an args hash stored in the file so that a rerun with
+the same arguments is a no-op, goal-image PNGs beside the file, and an atomic write. Output is
+byte-identical for a seed: every random draw comes from `np.random.default_rng(seed)` (or a
+per-episode child seed) in a fixed order, numbers are rounded to `decimals` before they are
+written, and nothing machine-specific (absolute paths, timings) goes into the file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from wanderland_nav.episodes.goal_images import render_goal_images
+from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
+from wanderland_nav.episodes.paths import first_heading_nav, last_heading_nav, polyline_length, resample_polyline
+from wanderland_nav.episodes.sampler import REJECTION_REASONS, EndpointSampler, SamplerSettings
+from wanderland_nav.episodes.schema import (
+    Episode,
+    EpisodeFormatError,
+    Goal,
+    load_episode_file,
+    rotation_from_yaw,
+    save_episodes,
+)
+
+FORMAT_VERSION = 1
+HIST_EDGES = (0, 5, 10, 15, 20, 30, 50, 100, math.inf)  # metres, for the length histogram
+
+
+@dataclass(frozen=True)
+class GeneratorSettings:
+    """Everything that shapes an episode set besides the scene, the count and the seed."""
+
+    sampler: SamplerSettings = field(default_factory=SamplerSettings)
+    step_size: float = 0.25  # metres between gt_locations (VLN-CE's forward step)
+    splits: tuple[float, float, float] = (0.8, 0.1, 0.1)  # train / val / test fractions
+    goal_images: bool = True
+    goal_image_width: int = 320
+    goal_image_height: int = 240
+    goal_image_hfov_deg: float = 90.0
+    goal_camera_height: float | None = None  # metres above the ground; None: median capture-camera height
+    render_device: str = "cpu"
+    decimals: int = 4  # rounding of every written coordinate (0.1 mm)
+
+    def __post_init__(self):
+        if self.step_size <= 0:
+            raise ValueError(f"GeneratorSettings.step_size must be > 0, got {self.step_size}")
+        if len(self.splits) != 3 or min(self.splits) < 0 or not math.isclose(sum(self.splits), 1.0, abs_tol=1e-6):
+            raise ValueError(f"GeneratorSettings.splits must be 3 fractions >= 0 summing to 1, got {self.splits}")
+        if self.goal_camera_height is not None and self.goal_camera_height <= 0:
+            raise ValueError(f"GeneratorSettings.goal_camera_height must be > 0, got {self.goal_camera_height}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["splits"] = list(self.splits)
+        d.pop("render_device")  # where we render does not change the result
+        return d
+
+
+@dataclass
+class GenerationSummary:
+    """What happened for one scene. `to_dict()` is deterministic (no timings) and goes into the file."""
+
+    scene: str
+    requested: int
+    kept: int
+    candidates: int
+    rounds: int
+    rejections: dict[str, int]
+    length_hist: dict[str, int]  # "0-5": n, ...
+    splits: dict[str, int]
+    seconds: float = 0.0
+    skipped: bool = False  # True when a rerun found an up-to-date file
+
+    @property
+    def episodes_per_second(self) -> float:
+        return self.kept / self.seconds if self.seconds > 0 else float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"requested": self.requested, "kept": self.kept, "candidates": self.candidates,
+                "rounds": self.rounds, "rejections": dict(self.rejections),
+                "length_hist_m": dict(self.length_hist), "splits": dict(self.splits)}
+
+    def format(self) -> str:
+        """A few human-readable lines for the console."""
+        rej = ", ".join(f"{k}={v}" for k, v in self.rejections.items() if v) or "none"
+        hist = " ".join(f"[{k}]:{v}" for k, v in self.length_hist.items() if v)
+        head = f"{self.scene}: kept {self.kept}/{self.requested}"
+        if self.skipped:
+            return head + " (up to date, nothing regenerated)"
+        lines = [f"{head} from {self.candidates} candidate pairs in {self.seconds:.1f}s "
+                 f"({self.episodes_per_second:.1f} episodes/s)",
+                 f"  rejected: {rej}", f"  geodesic length histogram (m): {hist}",
+                 f"  splits: {self.splits}"]
+        if self.kept < self.requested:
+            lines.append(f"  WARNING: only {self.kept} of {self.requested} episodes found; loosen the sampler "
+                         "settings (camera_radius, min/max_geodesic, min_separation) or ask for fewer")
+        return "\n".join(lines)
+
+
+def length_histogram(lengths: np.ndarray) -> dict[str, int]:
+    counts, _ = np.histogram(np.asarray(lengths, dtype=np.float64), bins=np.asarray(HIST_EDGES, dtype=np.float64))
+    names = [f"{a:g}-{b:g}" if math.isfinite(b) else f"{a:g}+" for a, b in zip(HIST_EDGES[:-1], HIST_EDGES[1:])]
+    return {n: int(c) for n, c in zip(names, counts)}
+
+
+def assign_splits(n: int, fractions: tuple[float, float, float], rng: np.random.Generator) -> list[str]:
+    """A random but seed-determined split per episode with exactly round(f * n) val and test episodes."""
+    n_val, n_test = int(round(fractions[1] * n)), int(round(fractions[2] * n))
+    n_val, n_test = min(n_val, n), min(n_test, n - min(n_val, n))
+    labels = np.array(["train"] * (n - n_val - n_test) + ["val"] * n_val + ["test"] * n_test)
+    return labels[rng.permutation(n)].tolist() if n else []
+
+
+# --------------------------------------------------------------------------- library entry
+
+
+def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
+                      settings: GeneratorSettings | None = None,
+                      instructions: InstructionGenerator | None = None,
+                      goal_image_dir: Path | None = None,
+                      progress: Callable[[int], None] | None = None) -> tuple[list[Episode], GenerationSummary]:
+    """Sample `num_episodes` expert episodes on `navmesh` for `scene` (a `Scene`).
+
+    Goal images are rendered into `goal_image_dir` (named `<episode_id:05d>.png`; the episode's
+    `goal_image` extra is the path relative to the folder above it) when it is given and
+    `settings.goal_images` is on. `progress(n)` is called as episodes are accepted.
+    Returns fewer episodes than asked if the sampler runs out of rounds (the summary says why).
+    """
+    settings = settings or GeneratorSettings()
+    instructions = instructions or RuleBasedInstructions()
+    if num_episodes < 0:
+        raise ValueError(f"num_episodes must be >= 0, got {num_episodes}")
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    R_ns = np.asarray(scene.nav_from_scene, dtype=np.float64)  # [3, 3]
+    up = scene.up_axis
+    sampler = EndpointSampler(navmesh, scene.camera_centers(), R_ns, settings.sampler)
+    pairs = sampler.sample(num_episodes, rng, progress=progress)
+    E = len(pairs.starts)
+    dec = settings.decimals
+
+    # dense, on-surface expert locations for every episode in one snap call
+    dense = [resample_polyline(p, settings.step_size) for p in pairs.paths]
+    counts = np.array([len(d) for d in dense], dtype=np.int64)
+    flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
+    if len(flat):
+        flat = np.asarray(navmesh.snap_point(flat), dtype=np.float64)  # heights from the navmesh surface
+        indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
+    else:
+        indoor_flat = np.zeros(0, dtype=bool)
+    offs = np.concatenate([[0], np.cumsum(counts)])
+    dense = [flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
+    indoor = [indoor_flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
+
+    corners = [np.round(p, dec) for p in pairs.paths]
+    corners_nav = [c @ R_ns.T for c in corners]
+    geodesic = np.array([round(polyline_length(c), dec) for c in corners])
+    yaw0 = np.array([first_heading_nav(c) for c in corners_nav])
+    yaw_goal = np.array([last_heading_nav(c) for c in corners_nav])
+    q_wxyz = np.round(rotation_from_yaw(yaw0, up).reshape(E, 4), 7)
+    radius = np.round(settings.sampler.goal_radius_for(geodesic), 3)
+    splits = assign_splits(E, settings.splits, rng)
+
+    # point goal in polar form relative to the start pose (nav frame): rho horizontal metres,
+    # phi radians counter-clockwise from the start heading (left > 0)
+    d_nav = (pairs.goals - pairs.starts) @ R_ns.T if E else np.zeros((0, 3))
+    rho = np.linalg.norm(d_nav[:, :2], axis=-1)
+    phi = (np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0 + np.pi) % (2 * np.pi) - np.pi
+
+    goal_paths: list[Path | None] = [None] * E
+    if goal_image_dir is not None and settings.goal_images and E:
+        goal_image_dir = Path(goal_image_dir)
+        height = settings.goal_camera_height or float(np.clip(np.median(sampler.camera_heights), 0.3, 3.0))
+        goal_paths = render_goal_images(
+            scene.gaussians_path, np.stack([c[-1] for c in corners_nav]), yaw_goal, R_ns,
+            [goal_image_dir / f"{i:05d}.png" for i in range(E)], height=height,
+            width=settings.goal_image_width, image_height=settings.goal_image_height,
+            hfov_deg=settings.goal_image_hfov_deg, device=settings.render_device)
+
+    child_seeds = np.random.SeedSequence(seed).spawn(E) if E else []
+    routes = [Route(corners_nav=corners_nav[i], dense_nav=dense[i] @ R_ns.T, indoor=indoor[i],
+                    geodesic_distance=float(geodesic[i]), seed=int(child_seeds[i].generate_state(1)[0]),
+                    goal_image=goal_paths[i], scene_name=scene.name) for i in range(E)]
+    texts = instructions(routes) if E else []
+    if len(texts) != E:
+        raise ValueError(f"instruction generator {getattr(instructions, 'name', instructions)!r} returned "
+                         f"{len(texts)} texts for {E} routes")
+
+    episodes = []
+    for i in range(E):
+        extras: dict[str, Any] = {
+            "split": splits[i],
+            "up_axis": up,
+            "euclidean_distance": round(float(pairs.euclidean[i]), dec),
+            "island": int(pairs.island[i]),
+            "point_goal_polar": [round(float(rho[i]), dec), round(float(phi[i]), 6)],
+        }
+        if goal_paths[i] is not None:
+            extras["goal_image"] = f"{goal_image_dir.name}/{goal_paths[i].name}"
+        ep = Episode(
+            episode_id=i, scene_id=scene.name,
+            start_position=corners[i][0], start_rotation_wxyz=q_wxyz[i],
+            geodesic_distance=float(geodesic[i]),
+            goals=[Goal(position=corners[i][-1], radius=float(radius[i]))],
+            instruction_text=texts[i],
+            reference_path=corners[i], gt_locations=np.round(dense[i], dec), gt_steps=int(len(dense[i]) - 1),
+            extras=extras,
+        )
+        ep.validate(where=f"{scene.name}: episodes[{i}]")
+        episodes.append(ep)
+
+    rej = {r: int(pairs.rejections.get(r, 0)) for r in REJECTION_REASONS}
+    summary = GenerationSummary(
+        scene=scene.name, requested=num_episodes, kept=E, candidates=pairs.candidates, rounds=pairs.rounds,
+        rejections=rej, length_hist=length_histogram(geodesic),
+        splits={s: splits.count(s) for s in ("train", "val", "test")}, seconds=time.perf_counter() - t0)
+    return episodes, summary
+
+
+# --------------------------------------------------------------------------- file side
+
+
+def navmesh_fingerprint(navmesh_path: Path | None) -> str:
+    """sha256 over the navmesh arrays (not the .npz bytes: zip headers carry timestamps)."""
+    h = hashlib.sha256()
+    if navmesh_path is None or not Path(navmesh_path).is_file():
+        return "none"
+    with np.load(navmesh_path, allow_pickle=False) as z:
+        for k in sorted(z.files):
+            a = np.ascontiguousarray(z[k])
+            h.update(k.encode()); h.update(str(a.dtype).encode()); h.update(str(a.shape).encode()); h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def args_hash(scene_name: str, num_episodes: int, seed: int, settings: GeneratorSettings,
+              instruction_source: str, navmesh_hash: str) -> str:
+    payload = {"format": FORMAT_VERSION, "scene": scene_name, "num_episodes": int(num_episodes), "seed": int(seed),
+               "settings": settings.to_dict(), "instructions": instruction_source, "navmesh": navmesh_hash}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _up_to_date(out: Path, digest: str) -> list[Episode] | None:
+    """The episodes of `out` if it was written with the same args hash and its goal images exist."""
+    if not out.is_file():
+        return None
+    try:
+        f = load_episode_file(out)
+    except (EpisodeFormatError, OSError):
+        return None
+    if f.extras.get("generator", {}).get("args_hash") != digest:
+        return None
+    if any("goal_image" in e.extras and not (out.parent / e.extras["goal_image"]).is_file() for e in f.episodes):
+        return None
+    return f.episodes
+
+
+def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: int,
+                         settings: GeneratorSettings | None = None,
+                         instructions: InstructionGenerator | None = None, force: bool = False,
+                         progress: Callable[[int], None] | None = None) -> tuple[list[Episode], GenerationSummary]:
+    """Generate and write `out` (atomic) with goal images in `out.parent / "goal_images"`.
+
+    A rerun with the same scene navmesh, count, seed and settings finds the stored args hash and
+    returns the file's episodes without regenerating (`summary.skipped`), unless `force`.
+    """
+    settings = settings or GeneratorSettings()
+    instructions = instructions or RuleBasedInstructions()
+    out = Path(out)
+    digest = args_hash(scene.name, num_episodes, seed, settings, getattr(instructions, "name", type(instructions).__name__),
+                       navmesh_fingerprint(getattr(scene, "navmesh_path", None)))
+    if not force:
+        existing = _up_to_date(out, digest)
+        if existing is not None:
+            split_counts = {s: sum(e.split == s for e in existing) for s in ("train", "val", "test")}
+            return existing, GenerationSummary(
+                scene=scene.name, requested=num_episodes, kept=len(existing), candidates=0, rounds=0,
+                rejections={}, length_hist=length_histogram([e.geodesic_distance for e in existing]),
+                splits=split_counts, skipped=True)
+    episodes, summary = generate_episodes(
+        scene, navmesh, num_episodes=num_episodes, seed=seed, settings=settings, instructions=instructions,
+        goal_image_dir=out.parent / "goal_images", progress=progress)
+    extras = {
+        "generator": {"name": "wanderland_nav.expert", "format": FORMAT_VERSION, "args_hash": digest,
+                      "num_episodes": num_episodes, "seed": seed, "instructions": instructions.name,
+                      "settings": settings.to_dict()},
+        "summary": summary.to_dict(),
+    }
+    save_episodes(out, episodes, extras)
+    return episodes, summary
