@@ -1,0 +1,85 @@
+"""The agent's head camera: intrinsics, poses, and batched rendering through the splat renderer.
+
+Why a module of its own: the same camera renders the agents' observations, the goal views of
+image-goal episodes and the benchmark, and it is where the nav frame meets the scene frame for
+rendering (`geometry.agent_camera_poses` returns scene-frame `world_from_cam`, the renderer wants
+`cam_from_world`, gsplat's `viewmats`).
+
+Intrinsics: square pixels, principal point at the image centre. Pinhole: `f = (W/2) / tan(hfov/2)`;
+fisheye (equidistant, `r = f * theta`, gsplat's fisheye model): `f = (W/2) / (hfov/2)`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+import torch
+
+from wanderland_nav.envs.config import CameraConfig
+from wanderland_nav.geometry import agent_camera_poses, invert_rigid
+
+Renderer = Callable[..., object]
+"""`render(gaussians, cam_from_world[C,4,4], K[C,3,3], width, height, *, render_mode, background,
+camera_model) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or None` (render.render)."""
+
+
+def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
+    """`K [3, 3]` float32 for the configured resolution, field of view and camera model."""
+    half = math.radians(cfg.hfov_deg) / 2
+    f = (cfg.width / 2) / (math.tan(half) if cfg.camera_model == "pinhole" else half)
+    return torch.tensor([[f, 0.0, cfg.width / 2], [0.0, f, cfg.height / 2], [0.0, 0.0, 1.0]], dtype=torch.float32)
+
+
+class AgentCamera:
+    """Renders what agents at nav-frame poses see, `render_chunk` cameras per renderer call."""
+
+    def __init__(self, cfg: CameraConfig, nav_from_scene: np.ndarray, renderer: Renderer, gaussians, device):
+        self.cfg = cfg
+        self.device = torch.device(device)
+        self.nav_from_scene = torch.as_tensor(np.asarray(nav_from_scene), dtype=torch.float32, device=self.device)
+        self.K = camera_intrinsics(cfg).to(self.device)
+        self.renderer = renderer
+        self.gaussians = gaussians
+        self.background = torch.tensor(cfg.background, dtype=torch.float32, device=self.device)
+
+    def cam_from_world(self, position_nav: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
+        """position_nav `[B, 3]` (feet), yaw `[B]` -> `cam_from_world [B, 4, 4]` in the scene frame."""
+        world_from_cam = agent_camera_poses(
+            position_nav.float(),
+            yaw.float(),
+            height=self.cfg.mount_height,
+            pitch=math.radians(self.cfg.pitch_deg),
+            nav_from_scene=self.nav_from_scene,
+        )
+        return invert_rigid(world_from_cam)
+
+    @torch.no_grad()
+    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
+        """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None."""
+        B = position_nav.shape[0]
+        H, W = self.cfg.height, self.cfg.width
+        rgb = torch.empty(B, H, W, 3, dtype=torch.uint8, device=self.device)
+        depth = torch.empty(B, H, W, 1, dtype=torch.float32, device=self.device) if self.cfg.depth else None
+        if B == 0:
+            return rgb, depth
+        viewmats = self.cam_from_world(position_nav, yaw)
+        mode = "RGB+ED" if self.cfg.depth else "RGB"
+        for s in range(0, B, self.cfg.render_chunk):  # chunks bound peak memory; each call is batched
+            e = min(B, s + self.cfg.render_chunk)
+            out = self.renderer(
+                self.gaussians,
+                viewmats[s:e],
+                self.K.expand(e - s, 3, 3),
+                W,
+                H,
+                render_mode=mode,
+                background=self.background,
+                camera_model=self.cfg.camera_model,
+            )
+            rgb[s:e] = (out.rgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
+            if depth is not None:
+                d = out.depth if out.depth is not None else torch.zeros(e - s, H, W, 1, device=self.device)
+                depth[s:e] = torch.nan_to_num(d.float(), nan=0.0, posinf=0.0, neginf=0.0)
+        return rgb, depth

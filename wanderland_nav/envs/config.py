@@ -1,0 +1,173 @@
+"""Typed configuration of `NavEnv`: every physical constant and reward coefficient in one place.
+
+The env never reads a DictConfig (CONTRACTS.md): Hydra entry points turn `conf/env/*.yaml` into a
+`NavEnvConfig` with `NavEnvConfig.from_dict`, which rejects unknown or mistyped fields with an error
+naming the field, so a typo in a YAML file cannot silently fall back to a default.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+ACTION_MODES = ("waypoints", "velocity")
+CAMERA_MODELS = ("pinhole", "fisheye")
+EPISODE_ORDERS = ("sample", "iterate")
+GOAL_IMAGE_MODES = ("auto", "render", "none")
+
+
+@dataclass
+class CameraConfig:
+    """The agent's head camera. Height and pitch are relative to the feet and the heading."""
+
+    width: int = 128  # pixels
+    height: int = 128  # pixels
+    hfov_deg: float = 90.0  # horizontal field of view (for fisheye: of the equidistant image circle)
+    mount_height: float = 1.2  # metres above the feet (a walker's chest camera; CityWalker ~1.2-1.5 m)
+    pitch_deg: float = 10.0  # positive tilts the view down toward the ground
+    camera_model: str = "pinhole"  # "pinhole" | "fisheye" (equidistant, as gsplat)
+    depth: bool = False  # also emit keys.DEPTH
+    history: int = 5  # T frames in keys.RGB (CityWalker: 5 context frames)
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] where nothing is hit
+    render_chunk: int = 64  # cameras per render() call, bounds the renderer's peak memory
+
+
+@dataclass
+class KinematicsConfig:
+    """How actions move the body: unicycle kinematics integrated over one control period."""
+
+    action_mode: str = "waypoints"  # "waypoints": ACTION [K, 2] body-frame; "velocity": ACTION [2] (v, omega)
+    num_waypoints: int = 5  # K
+    waypoint_range: float = 5.0  # |x|, |y| bound (metres) of the waypoint action spec
+    control_period: float = 0.5  # seconds of simulated time per env step
+    substeps: int = 4  # controller/integration substeps within a control period
+    max_linear_speed: float = 1.0  # m/s (forward only: a walker does not back up)
+    max_angular_speed: float = 1.5  # rad/s
+    heading_gain: float = 3.0  # omega = gain * heading error (rad/s per rad), clipped
+    turn_in_place_deg: float = 45.0  # beyond this heading error the controller turns on the spot
+    arrive_distance: float = 0.05  # metres: a waypoint closer than this counts as reached (no motion)
+
+
+@dataclass
+class RewardConfig:
+    """r = +R_succ on success, -R_fail on intervention, else -alpha + beta * (d_{t-1} - d_t)."""
+
+    success_reward: float = 10.0  # R_succ
+    failure_penalty: float = 10.0  # R_fail
+    time_penalty: float = 0.01  # alpha, per step
+    progress_scale: float = 1.0  # beta, per metre of geodesic progress
+
+
+@dataclass
+class TerminationConfig:
+    """Success, intervention (stuck / no progress / off the navmesh) and timeout."""
+
+    max_steps: int = 1000  # timeout: truncated, not terminated
+    success_radius: float | None = None  # metres; None: the episode's goal radius
+    no_progress_steps: int = 100  # intervention when the best distance has not improved for this many steps
+    progress_epsilon: float = 0.1  # metres of geodesic improvement that count as progress
+    stuck_steps: int = 20  # intervention after this many consecutive blocked, motionless steps
+    stuck_distance: float = 0.01  # metres moved in a colliding step below which the step counts as stuck
+    check_navigable: bool = True  # intervention when the agent is no longer on the navmesh
+
+
+@dataclass
+class NavEnvConfig:
+    """Everything `NavEnv` needs besides the scene, the episodes, the batch size and the device."""
+
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    termination: TerminationConfig = field(default_factory=TerminationConfig)
+    episode_order: str = "sample"  # "sample": seeded random draws; "iterate": 0, 1, 2, ... (evaluation)
+    split: str | None = None  # episodes.json split the factory loads (None: all)
+    goal_image: str = "auto"  # "auto": load the episode's goal_image file; "render": render every goal view; "none"
+    instruction_length: int = 512  # L of keys.INSTRUCTION_TOKENS (UTF-8 bytes + 1, padded with 0)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise `ValueError` naming the first out-of-range field."""
+        c, k, t, r = self.camera, self.kinematics, self.termination, self.reward
+        checks = [
+            ("camera.width", c.width >= 8, c.width),
+            ("camera.height", c.height >= 8, c.height),
+            ("camera.hfov_deg", 0 < c.hfov_deg < (360 if c.camera_model == "fisheye" else 180), c.hfov_deg),
+            ("camera.camera_model", c.camera_model in CAMERA_MODELS, c.camera_model),
+            ("camera.history", c.history >= 1, c.history),
+            ("camera.render_chunk", c.render_chunk >= 1, c.render_chunk),
+            ("camera.background", len(c.background) == 3, c.background),
+            ("kinematics.action_mode", k.action_mode in ACTION_MODES, k.action_mode),
+            ("kinematics.num_waypoints", k.num_waypoints >= 1, k.num_waypoints),
+            ("kinematics.waypoint_range", k.waypoint_range > 0, k.waypoint_range),
+            ("kinematics.control_period", k.control_period > 0, k.control_period),
+            ("kinematics.substeps", k.substeps >= 1, k.substeps),
+            ("kinematics.max_linear_speed", k.max_linear_speed > 0, k.max_linear_speed),
+            ("kinematics.max_angular_speed", k.max_angular_speed > 0, k.max_angular_speed),
+            ("kinematics.heading_gain", k.heading_gain > 0, k.heading_gain),
+            ("kinematics.turn_in_place_deg", 0 < k.turn_in_place_deg <= 180, k.turn_in_place_deg),
+            ("termination.max_steps", t.max_steps >= 1, t.max_steps),
+            ("termination.success_radius", t.success_radius is None or t.success_radius > 0, t.success_radius),
+            ("termination.no_progress_steps", t.no_progress_steps >= 1, t.no_progress_steps),
+            ("termination.stuck_steps", t.stuck_steps >= 1, t.stuck_steps),
+            ("reward.time_penalty", math.isfinite(r.time_penalty), r.time_penalty),
+            ("episode_order", self.episode_order in EPISODE_ORDERS, self.episode_order),
+            ("goal_image", self.goal_image in GOAL_IMAGE_MODES, self.goal_image),
+            ("instruction_length", self.instruction_length >= 1, self.instruction_length),
+        ]
+        for name, ok, value in checks:
+            if not ok:
+                raise ValueError(f"NavEnvConfig.{name}: invalid value {value!r}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | None, *, source: str = "env config") -> "NavEnvConfig":
+        """Build from a plain nested mapping (e.g. `OmegaConf.to_container(cfg.env)`), strictly."""
+        return _build(cls, dict(d or {}), source)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _build(cls, d: dict[str, Any], where: str):
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(d) - set(fields))
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {unknown}; known: {sorted(fields)}")
+    kwargs = {}
+    for name, value in d.items():
+        default = getattr(cls(), name)
+        if dataclasses.is_dataclass(default):
+            if not isinstance(value, Mapping):
+                raise ValueError(f"{where}.{name}: expected a mapping, got {value!r}")
+            kwargs[name] = _build(type(default), dict(value), f"{where}.{name}")
+        else:
+            kwargs[name] = _coerce(value, default, f"{where}.{name}")
+    try:
+        return cls(**kwargs)
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+
+
+def _coerce(value: Any, default: Any, where: str) -> Any:
+    """Check a YAML scalar against the default's type (ints may stand for floats)."""
+    if value is None or default is None:
+        return value
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"{where}: expected true/false, got {value!r}")
+        return value
+    if isinstance(default, (int, float)) and not isinstance(value, bool) and isinstance(value, (int, float)):
+        if isinstance(default, int) and not isinstance(default, bool) and isinstance(value, float):
+            if not value.is_integer():
+                raise ValueError(f"{where}: expected an integer, got {value!r}")
+            return int(value)
+        return type(default)(value)
+    if isinstance(default, tuple) and isinstance(value, (list, tuple)):
+        return tuple(float(v) for v in value)
+    if isinstance(default, str) and isinstance(value, str):
+        return value
+    raise ValueError(f"{where}: expected {type(default).__name__}, got {value!r}")
+

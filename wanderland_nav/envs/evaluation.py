@@ -1,0 +1,72 @@
+"""Evaluate a policy on a NavEnv: every test episode exactly once, NE / SR / SPL / IR per group.
+
+The env runs its B agents in parallel and restarts finished ones (partial resets); episodes are
+handed out in file order (`episode_order="iterate"`) and identified by their start serial, so the
+first `num_episodes` started episodes are the ones counted, whatever B is. With a deterministic
+policy the records therefore do not depend on the batch size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table
+
+
+@dataclass
+class EvaluationResult:
+    records: list[dict]  # one per episode (EpisodeMetrics.to_dict()), by start serial
+    summary: dict[str, dict[str, float]]  # aggregate_metrics(...)
+    table: str  # printable NE / SR / SPL / IR table
+
+
+@torch.no_grad()
+def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 0, name: str = "policy",
+                   progress: bool = False) -> EvaluationResult:
+    """Roll `policy` (a TensorDict -> TensorDict callable writing `keys.ACTION`) until `num_episodes` ended.
+
+    num_episodes: defaults to the number of episodes in the env (each once). The env is re-seeded
+    and switched to in-order episodes for the run (its previous order is restored afterwards).
+    """
+    n = len(env.table) if num_episodes is None else int(num_episodes)
+    if n < 1:
+        raise ValueError(f"run_evaluation: num_episodes must be >= 1, got {num_episodes}")
+    B = env.batch_size[0]
+    budget = (math.ceil(n / B) + 1) * (env.config.termination.max_steps + 1)  # every episode ends by timeout
+    order = env.config.episode_order
+    env.config.episode_order = "iterate"
+    got: dict[int, EpisodeMetrics] = {}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, desc=f"eval {name}", unit="ep")
+    try:
+        env.set_seed(seed)
+        env.pop_finished_metrics()
+        if hasattr(policy, "reset"):
+            policy.reset()
+        td = env.reset()
+        for _ in range(budget):
+            td = policy(td)
+            _, td = env.step_and_maybe_reset(td)
+            for m in env.pop_finished_metrics():
+                if m.serial < n and m.serial not in got:
+                    got[m.serial] = m
+                    if bar is not None:
+                        bar.update(1)
+            if len(got) == n:
+                break
+        else:
+            raise RuntimeError(f"run_evaluation: only {len(got)}/{n} episodes ended within {budget} steps")
+    finally:
+        env.config.episode_order = order
+        if bar is not None:
+            bar.close()
+    metrics = [got[i] for i in range(n)]
+    summary = aggregate_metrics(metrics)
+    table = format_table({f"{name}/{g}": r for g, r in summary.items()})
+    return EvaluationResult([m.to_dict() for m in metrics], summary, table)

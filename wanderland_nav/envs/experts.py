@@ -1,0 +1,156 @@
+"""Reference policies that run through the same API as learned ones: the path-following expert and random.
+
+The expert is privileged: it reads `AGENT_POSITION`, `AGENT_YAW`, `EPISODE_INDEX` and
+`STEP_COUNT` and follows each episode's expert path (the navmesh shortest path stored as
+`reference_path`, or a fresh `NavMesh.find_path` from the start), emitting what a learned policy
+emits: K body-frame waypoints spaced one control period of travel apart (or the `(v, omega)` that
+tracks the first of them). It is the upper bound in the evaluation table and the sanity check of the
+whole stack (frames, kinematics, navmesh motion, distances, metrics): if it does not reach SR ~1
+something in that chain is wrong.
+
+All per-agent work is batched over padded paths `[E, P, 3]`: projection onto the path, arc-length
+progress and waypoint interpolation are tensor ops; loops only run over episodes at construction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from wanderland_nav import keys
+from wanderland_nav.envs.kinematics import track_point_command
+from wanderland_nav.geometry import world_to_body_2d
+
+PATH_SOURCES = ("reference", "navmesh")
+
+
+class ExpertPolicy(TensorDictModuleBase):
+    """Follows each episode's shortest path; waypoint or velocity actions to match `env.action_spec`.
+
+    Args:
+        env: the `NavEnv` (for its episodes, frame, navmesh and kinematics config).
+        source: "reference" uses the episode's `reference_path` (falls back to the navmesh when a
+            path is missing); "navmesh" recomputes `find_path(start, goal)`.
+        spacing: metres between waypoints; default one control period at full speed.
+        window: metres of path ahead of the current progress searched when projecting the agent,
+            so a path that doubles back near itself cannot make the expert skip ahead or back.
+    """
+
+    def __init__(self, env, source: str = "reference", spacing: float | None = None, window: float = 3.0):
+        super().__init__()
+        if source not in PATH_SOURCES:
+            raise ValueError(f"ExpertPolicy.source: expected one of {PATH_SOURCES}, got {source!r}")
+        k = env.config.kinematics
+        self.kin = k
+        self.mode = k.action_mode
+        self.num_waypoints = k.num_waypoints
+        self.spacing = float(spacing) if spacing is not None else k.max_linear_speed * k.control_period
+        self.window = float(window)
+        self.in_keys = [keys.AGENT_POSITION, keys.AGENT_YAW, keys.EPISODE_INDEX, keys.STEP_COUNT]
+        self.out_keys = [keys.ACTION]
+        paths = [self._episode_path(env, i, source) for i in range(len(env.episodes))]  # nav frame [P_i, 3]
+        P = max(len(p) for p in paths)
+        padded = np.stack([np.concatenate([p, np.repeat(p[-1:], P - len(p), 0)]) for p in paths])  # [E, P, 3]
+        seg = np.linalg.norm(np.diff(padded, axis=1), axis=-1)  # [E, P-1]
+        cum = np.concatenate([np.zeros((len(paths), 1)), np.cumsum(seg, axis=1)], axis=1)  # [E, P]
+        dev = env.device
+        self.register_buffer("paths", torch.as_tensor(padded, dtype=torch.float32, device=dev), persistent=False)
+        self.register_buffer("cum", torch.as_tensor(cum, dtype=torch.float32, device=dev), persistent=False)
+        self._progress: torch.Tensor | None = None  # [B] arc length reached along each agent's path
+
+    @staticmethod
+    def _episode_path(env, i: int, source: str) -> np.ndarray:
+        e = env.episodes[i]
+        start = env.table.start_position[i].double().cpu().numpy()
+        goal = env.table.goal_position[i].double().cpu().numpy()
+        R = np.asarray(env.scene.nav_from_scene, dtype=np.float64)
+        ref = np.asarray(getattr(e, "reference_path", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
+        if source == "navmesh" or len(ref) < 2:
+            res = env.navmesh.find_path(np.asarray(e.start_position, dtype=np.float64), np.asarray(e.goal_position, dtype=np.float64))
+            pts, _ = res
+            ref = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+            if len(ref) == 0:
+                raise ValueError(f"ExpertPolicy: episodes[{i}] (id {e.episode_id}): no navmesh path from start to goal")
+        p = ref @ R.T
+        p = np.concatenate([start[None], p[1:] if np.linalg.norm(p[0] - start) < 1.0 else p, goal[None]])
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(p, axis=0), axis=-1) > 1e-6])
+        return p[keep]
+
+    def reset(self) -> None:
+        self._progress = None
+
+    @torch.no_grad()
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        pos = td.get(keys.AGENT_POSITION).float()  # [B, 3] nav
+        yaw = td.get(keys.AGENT_YAW).float().reshape(-1)  # [B]
+        ep = td.get(keys.EPISODE_INDEX).reshape(-1).long()
+        fresh = td.get(keys.STEP_COUNT).reshape(-1) == 0
+        s_prev = self._progress
+        if s_prev is None or s_prev.shape != yaw.shape:
+            s_prev = torch.zeros_like(yaw)
+        s_prev = torch.where(fresh, torch.zeros_like(s_prev), s_prev)
+        s = self._project(pos, ep, s_prev)
+        self._progress = s
+        wp = self._waypoints(pos, yaw, ep, s)  # [B, K, 2] body frame
+        if self.mode == "velocity":
+            v, omega = track_point_command(wp[:, 0], self.kin.control_period, self.kin.control_period, self.kin)
+            action = torch.stack([v, omega], -1)
+        else:
+            action = wp
+        td.set(keys.ACTION, action.to(td.device) if td.device is not None else action)
+        return td
+
+    def _project(self, pos: torch.Tensor, ep: torch.Tensor, s_prev: torch.Tensor) -> torch.Tensor:
+        """Arc length `[B]` of the closest path point within [s_prev - 0.5, s_prev + window]; never decreases."""
+        path, cum = self.paths[ep], self.cum[ep]  # [B, P, 3], [B, P]
+        a, ab = path[:, :-1], path[:, 1:] - path[:, :-1]  # [B, S, 3]
+        seg = cum[:, 1:] - cum[:, :-1]  # [B, S]
+        t = (((pos[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1).clamp_min(1e-12)).clamp(0.0, 1.0)
+        q = a + t[..., None] * ab
+        d = (pos[:, None] - q).norm(dim=-1)  # [B, S]
+        arc = cum[:, :-1] + t * seg
+        ok = (arc >= s_prev[:, None] - 0.5) & (arc <= s_prev[:, None] + self.window)
+        d = torch.where(ok, d, torch.full_like(d, float("inf")))
+        best = d.argmin(-1)
+        s_best = arc.gather(-1, best[:, None]).squeeze(-1)
+        s_best = torch.where(ok.any(-1), s_best, s_prev)
+        return torch.maximum(s_prev, s_best)
+
+    def _waypoints(self, pos, yaw, ep, s) -> torch.Tensor:
+        """K path points at arc lengths s + spacing * (1..K) (clamped to the goal), body frame `[B, K, 2]`."""
+        path, cum = self.paths[ep], self.cum[ep]  # [B, P, 3], [B, P]
+        K = self.num_waypoints
+        steps = torch.arange(1, K + 1, device=pos.device, dtype=pos.dtype) * self.spacing
+        target = torch.minimum(s[:, None] + steps, cum[:, -1:])  # [B, K]
+        i = (torch.searchsorted(cum.contiguous(), target.contiguous(), right=True) - 1).clamp(0, path.shape[1] - 2)
+        c0, c1 = cum.gather(1, i), cum.gather(1, i + 1)
+        frac = ((target - c0) / (c1 - c0).clamp_min(1e-9)).clamp(0.0, 1.0)
+        p0 = path.gather(1, i[..., None].expand(*i.shape, 3))
+        p1 = path.gather(1, (i + 1)[..., None].expand(*i.shape, 3))
+        pts = p0 + frac[..., None] * (p1 - p0)
+        return world_to_body_2d(pts[..., :2], pos[:, :2], yaw)
+
+
+class RandomPolicy(TensorDictModuleBase):
+    """Uniform actions within `action_spec`'s bounds from its own seeded generator (the lower bound)."""
+
+    def __init__(self, action_spec, seed: int = 0):
+        super().__init__()
+        self.in_keys = []
+        self.out_keys = [keys.ACTION]
+        self.low = action_spec.space.low.clone()
+        self.high = action_spec.space.high.clone()
+        self.seed = seed
+        self.reset()
+
+    def reset(self) -> None:
+        self._gen = torch.Generator().manual_seed(self.seed)
+
+    @torch.no_grad()
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        u = torch.rand(self.low.shape, generator=self._gen)
+        a = self.low.cpu() + (self.high.cpu() - self.low.cpu()) * u
+        td.set(keys.ACTION, a.to(self.low.device))
+        return td

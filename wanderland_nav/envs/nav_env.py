@@ -1,0 +1,427 @@
+"""`NavEnv`: B agents navigating one scene, moved on the navmesh, seeing through the splat renderer.
+
+One TorchRL `EnvBase` with `batch_size=[B]`. The agent state (position at the feet, heading) lives
+in the **nav frame** (z up); the navmesh and the renderer are called in the **scene frame** at the
+boundary (`Scene.nav_from_scene`). A step is a fixed sequence of batched calls, never a loop over
+agents:
+
+    plan_motion (kinematics)  ->  NavMesh.move_along_surface  ->  distance field lookup
+    -> rewards / terminations  ->  render the B cameras  ->  assemble observations
+
+Geodesic distances come from one `NavMesh.distance_field` over all (de-duplicated) episode goals,
+built at construction, so `d_t` is a table lookup per step. Episode-level metrics are accumulated
+per agent and handed out by `pop_finished_metrics()` for the trainer and the evaluator.
+
+State tensors are replaced, never written in place: the tensors returned in a step's TensorDict
+may be kept by a rollout, and must not change afterwards.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from wanderland_nav import keys
+from wanderland_nav.envs.camera import AgentCamera, Renderer
+from wanderland_nav.envs.config import NavEnvConfig
+from wanderland_nav.envs.episode_table import build_episode_table, load_goal_images
+from wanderland_nav.envs.kinematics import plan_motion
+from wanderland_nav.envs.metrics import EpisodeMetrics, spl
+from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.geometry import wrap_angle, world_to_body_2d
+
+
+class NavEnv(EnvBase):
+    """Batched point-goal / image-goal / instruction navigation in a prepared scene.
+
+    Args:
+        scene: a loaded `Scene` (needs `navmesh_path` and `gaussians_path` unless `navmesh` /
+            `gaussians` are given).
+        episodes: `Episode`s of that scene (scene frame), e.g. `load_episodes(path, split="val")`.
+        batch_size: `[B]`, the number of agents stepped together.
+        device: where observations, actions and the renderer live (the navmesh runs on CPU).
+        config: `NavEnvConfig`.
+        navmesh, gaussians, renderer: already-loaded parts, to share them between envs or to test
+            with stand-ins; by default loaded from the scene folder / `wanderland_nav.render.render`.
+        seed: seeds the episode sampler (also `set_seed`).
+    """
+
+    batch_locked = True
+
+    def __init__(
+        self,
+        scene,
+        episodes: Sequence,
+        batch_size: Sequence[int] = (1,),
+        device: str | torch.device = "cpu",
+        config: NavEnvConfig | None = None,
+        *,
+        navmesh=None,
+        gaussians=None,
+        renderer: Renderer | None = None,
+        seed: int = 0,
+    ):
+        batch_size = torch.Size(batch_size)
+        if len(batch_size) != 1 or batch_size[0] < 1:
+            raise ValueError(f"NavEnv: batch_size must be [B] with B >= 1, got {list(batch_size)}")
+        super().__init__(device=device, batch_size=batch_size)
+        self.config = config if config is not None else NavEnvConfig()
+        self.config.validate()
+        self.scene = scene
+        self.episodes = list(episodes)
+        where = f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
+        self.navmesh = navmesh if navmesh is not None else _load_navmesh(scene)
+        if renderer is None or gaussians is None:
+            gaussians, renderer = _load_renderer(scene, gaussians, renderer, self.device)
+        self._R_ns = torch.as_tensor(np.asarray(scene.nav_from_scene), dtype=torch.float32)  # nav_from_scene [3, 3]
+        cfg = self.config
+        self.table = build_episode_table(
+            self.episodes, scene, self.navmesh, instruction_length=cfg.instruction_length, where=where
+        ).to(self.device)
+        self.field = self.navmesh.distance_field(self.table.field_goals_scene)
+        self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
+        self._init_goal_images(where)
+        if cfg.termination.success_radius is not None:
+            self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
+        all_eps = torch.arange(len(self.table), device=self.device)
+        self.shortest_length = self._distance(self.table.start_position, all_eps)  # [E] geodesic start -> goal
+        bad = torch.nonzero(~torch.isfinite(self.shortest_length)).flatten()
+        if bad.numel():
+            i = int(bad[0])
+            raise ValueError(f"{where}: episodes[{i}] (id {self.table.ids[i]}): goal unreachable from the start on the navmesh")
+        self._make_specs()
+        self._init_state()
+        self.timings: dict[str, float] = defaultdict(float)
+        self._finished: list[dict[str, torch.Tensor]] = []
+        self.set_seed(seed)
+
+    # ------------------------------------------------------------------ construction
+
+    def _init_goal_images(self, where: str) -> None:
+        c, mode = self.config.camera, self.config.goal_image
+        E = len(self.table)
+        if mode == "render":
+            imgs, _ = self.camera.render(self.table.goal_position, self.table.goal_yaw)
+            has = torch.ones(E, dtype=torch.bool, device=self.device)
+        elif mode == "auto":
+            roots = [Path(p) for p in (getattr(self.scene, "root", None),) if p is not None]
+            ep_path = getattr(self.scene, "episodes_path", None)
+            if ep_path is not None:
+                roots.insert(0, Path(ep_path).parent)
+            imgs, has = load_goal_images(self.episodes, roots, c.height, c.width, where=where)
+        else:
+            imgs = torch.zeros(E, c.height, c.width, 3, dtype=torch.uint8)
+            has = torch.zeros(E, dtype=torch.bool)
+        self._goal_images, self._has_goal_image = imgs.to(self.device), has.to(self.device)
+
+    def _make_specs(self) -> None:
+        B, c, k = self.batch_size, self.config.camera, self.config.kinematics
+        T, H, W, L = c.history, c.height, c.width, self.config.instruction_length
+        dev = self.device
+        f32 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.float32, device=dev)  # noqa: E731
+        i64 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.int64, device=dev)  # noqa: E731
+        flag = lambda: Categorical(2, shape=(*B, 1), dtype=torch.bool, device=dev)  # noqa: E731
+        img = lambda *s: Bounded(0, 255, shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
+        obs = {
+            keys.RGB: img(T, H, W, 3),
+            keys.PAST_POSITIONS: f32(T, 2),
+            keys.GOAL_VECTOR: f32(2),
+            keys.GOAL_POSE: f32(4),
+            keys.GOAL_IMAGE: img(H, W, 3),
+            keys.HAS_GOAL_IMAGE: flag(),
+            keys.INSTRUCTION_TOKENS: Bounded(0, 256, shape=(*B, L), dtype=torch.int64, device=dev),
+            keys.EPISODE_INDEX: i64(1),
+            keys.STEP_COUNT: i64(1),
+            keys.AGENT_POSITION: f32(3),
+            keys.AGENT_YAW: f32(1),
+            keys.DISTANCE_TO_GOAL: f32(1),
+            keys.SUCCESS: flag(),
+            keys.INTERVENTION: flag(),
+            keys.COLLISION: flag(),
+        }
+        if c.depth:
+            obs[keys.DEPTH] = f32(T, H, W, 1)
+        self.observation_spec = Composite(obs, shape=B, device=dev)
+        if k.action_mode == "waypoints":
+            r = k.waypoint_range
+            self.action_spec = Bounded(-r, r, shape=(*B, k.num_waypoints, 2), dtype=torch.float32, device=dev)
+        else:
+            low = torch.tensor([0.0, -k.max_angular_speed], device=dev).expand(*B, 2)
+            high = torch.tensor([k.max_linear_speed, k.max_angular_speed], device=dev).expand(*B, 2)
+            self.action_spec = Bounded(low.clone(), high.clone(), shape=(*B, 2), dtype=torch.float32, device=dev)
+        self.reward_spec = Unbounded(shape=(*B, 1), dtype=torch.float32, device=dev)
+        self.done_spec = Composite(
+            {keys.DONE: flag(), keys.TERMINATED: flag(), keys.TRUNCATED: flag()}, shape=B, device=dev
+        )
+
+    def _init_state(self) -> None:
+        B, c, dev = self.batch_size[0], self.config.camera, self.device
+        T, H, W = c.history, c.height, c.width
+        z = lambda *s, dtype=torch.float32: torch.zeros(B, *s, dtype=dtype, device=dev)  # noqa: E731
+        self._ep, self._serial, self._steps = z(dtype=torch.long), z(dtype=torch.long), z(dtype=torch.long)
+        self._pos, self._yaw = z(3), z()
+        self._rgb = z(T, H, W, 3, dtype=torch.uint8)
+        self._depth = z(T, H, W, 1) if c.depth else None
+        self._pos_hist = z(T, 3)
+        self._dist = z()
+        self._progress = ProgressState(z(), z(dtype=torch.long), z(dtype=torch.long))
+        self._path_len, self._collisions = z(), z(dtype=torch.long)
+        self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
+        self._started = False
+
+    # ------------------------------------------------------------------ TorchRL API
+
+    def _set_seed(self, seed: int | None) -> None:
+        """Seeds the episode sampler and restarts the episode cursor: same seed, same episodes."""
+        self._rng = torch.Generator().manual_seed(0 if seed is None else int(seed))
+        self._cursor = 0
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        B = self.batch_size[0]
+        mask = None if tensordict is None else tensordict.get(keys.RESET, None)
+        if mask is None or not self._started:
+            idx = torch.arange(B, device=self.device)
+        else:
+            idx = mask.reshape(B).to(self.device).nonzero().flatten()
+        self._started = True
+        if idx.numel():
+            self._start_episodes(idx)
+        out = self._observation()
+        false = torch.zeros(B, 1, dtype=torch.bool, device=self.device)
+        out.update({keys.DONE: false, keys.TERMINATED: false.clone(), keys.TRUNCATED: false.clone()})
+        return out
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        t0 = time.perf_counter()
+        cfg = self.config
+        action = tensordict.get(keys.ACTION).to(self.device, torch.float32)
+        plan_xy, plan_yaw = plan_motion(self._pos[:, :2], self._yaw, action, cfg.kinematics)
+        target = torch.cat([plan_xy, self._pos[:, 2:]], -1)  # [B, 3] nav: the surface sets the height
+        end, collided = self._move(self._pos, target)
+        moved = (end - self._pos).norm(dim=-1)
+        if cfg.termination.check_navigable:
+            navigable = self._navigable(end)
+        else:
+            navigable = torch.ones_like(collided)
+        t1 = time.perf_counter()
+        d_now = self._distance(end, self._ep)
+        steps = self._steps + 1
+        progress = update_progress(self._progress, d_now, collided, moved, cfg.termination)
+        success, intervention, truncated = terminations(
+            d_now, self.table.goal_radius[self._ep], progress, navigable, steps, cfg.termination
+        )
+        reward = navigation_reward(self._dist, d_now, success, intervention, cfg.reward)
+        self._pos, self._yaw, self._steps, self._dist, self._progress = end, plan_yaw, steps, d_now, progress
+        self._path_len = self._path_len + moved
+        self._collisions = self._collisions + collided.long()
+        self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
+        t2 = time.perf_counter()
+        rgb, depth = self.camera.render(end, plan_yaw)
+        t3 = time.perf_counter()
+        self._push_frame(rgb, depth, end)
+        terminated = success | intervention
+        done = terminated | truncated
+        if bool(done.any()):
+            self._record_finished(done.nonzero().flatten(), success, intervention, truncated)
+        out = self._observation()
+        out.update(
+            {
+                keys.REWARD: reward.unsqueeze(-1),
+                keys.DONE: done.unsqueeze(-1),
+                keys.TERMINATED: terminated.unsqueeze(-1),
+                keys.TRUNCATED: truncated.unsqueeze(-1),
+            }
+        )
+        t4 = time.perf_counter()
+        tm = self.timings
+        tm["physics"] += t1 - t0
+        tm["rules"] += t2 - t1
+        tm["render"] += t3 - t2
+        tm["observation"] += t4 - t3
+        tm["step"] += t4 - t0
+        tm["frames"] += self.batch_size[0]
+        return out
+
+    # ------------------------------------------------------------------ episodes
+
+    def _draw_episodes(self, n: int) -> torch.Tensor:
+        """n episode indices: seeded uniform draws, or the next n in order (evaluation)."""
+        E = len(self.table)
+        if self.config.episode_order == "iterate":
+            ep = (self._cursor + torch.arange(n)) % E
+        else:
+            ep = torch.randint(E, (n,), generator=self._rng)
+        return ep.to(self.device)
+
+    def _start_episodes(self, idx: torch.Tensor) -> None:
+        """(Re)start the agents `idx [n]` on freshly drawn episodes; out of place for every state tensor."""
+        n, T = idx.numel(), self.config.camera.history
+        ep = self._draw_episodes(n)
+        serial = self._cursor + torch.arange(n, device=self.device)
+        self._cursor += n
+        pos, yaw = self.table.start_position[ep], self.table.start_yaw[ep]
+        t0 = time.perf_counter()
+        rgb, depth = self.camera.render(pos, yaw)
+        self.timings["reset_render"] += time.perf_counter() - t0
+        d0 = self.shortest_length[ep]
+        put = lambda state, new: state.index_copy(0, idx, new.to(state.dtype))  # noqa: E731
+        zl = torch.zeros(n, dtype=torch.long, device=self.device)
+        self._ep, self._serial, self._steps = put(self._ep, ep), put(self._serial, serial), put(self._steps, zl)
+        self._pos, self._yaw, self._dist = put(self._pos, pos), put(self._yaw, yaw), put(self._dist, d0)
+        self._rgb = put(self._rgb, rgb.unsqueeze(1).expand(n, T, *rgb.shape[1:]))
+        if self._depth is not None:
+            self._depth = put(self._depth, depth.unsqueeze(1).expand(n, T, *depth.shape[1:]))
+        self._pos_hist = put(self._pos_hist, pos.unsqueeze(1).expand(n, T, 3))
+        p = self._progress
+        self._progress = ProgressState(put(p.best_distance, d0), put(p.steps_without_progress, zl), put(p.stuck_steps, zl))
+        self._path_len, self._collisions = put(self._path_len, zl.float()), put(self._collisions, zl)
+        self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
+
+    def _record_finished(self, idx, success, intervention, truncated) -> None:
+        """Stash the metrics of the agents `idx` whose episode just ended (tensors; converted lazily)."""
+        ep = self._ep[idx]
+        self._finished.append(
+            {
+                "episode_index": ep,
+                "serial": self._serial[idx],
+                "ne": self._dist[idx],
+                "success": success[idx],
+                "intervention": intervention[idx],
+                "timeout": truncated[idx],
+                "path_length": self._path_len[idx],
+                "shortest": self.shortest_length[ep],
+                "collisions": self._collisions[idx],
+                "steps": self._steps[idx],
+            }
+        )
+
+    def pop_finished_metrics(self) -> list[EpisodeMetrics]:
+        """Metrics of every episode that ended since the last call, in the order they ended.
+
+        `serial` on each record is the order in which the env *started* that episode since the
+        last `set_seed`, which is what the evaluator uses to count each test episode once.
+        """
+        out = []
+        for rec in self._finished:
+            cols = {k: v.detach().cpu().tolist() for k, v in rec.items()}
+            for j in range(len(cols["serial"])):  # per finished episode, off the step path
+                e = cols["episode_index"][j]
+                m = EpisodeMetrics(
+                    episode_id=self.table.ids[e],
+                    episode_index=e,
+                    navigation_error=float(cols["ne"][j]),
+                    success=bool(cols["success"][j]),
+                    spl=spl(bool(cols["success"][j]), cols["shortest"][j], cols["path_length"][j]),
+                    intervention=bool(cols["intervention"][j]),
+                    timeout=bool(cols["timeout"][j]),
+                    path_length=float(cols["path_length"][j]),
+                    shortest_length=float(cols["shortest"][j]),
+                    collisions=int(cols["collisions"][j]),
+                    steps=int(cols["steps"][j]),
+                    environment=self.table.environment[e],
+                    serial=int(cols["serial"][j]),
+                )
+                out.append(m)
+        self._finished = []
+        return out
+
+    # ------------------------------------------------------------------ observations
+
+    def _push_frame(self, rgb: torch.Tensor, depth: torch.Tensor | None, pos: torch.Tensor) -> None:
+        self._rgb = torch.cat([self._rgb[:, 1:], rgb.unsqueeze(1)], 1)
+        if self._depth is not None:
+            self._depth = torch.cat([self._depth[:, 1:], depth.unsqueeze(1)], 1)
+        self._pos_hist = torch.cat([self._pos_hist[:, 1:], pos.unsqueeze(1)], 1)
+
+    def _observation(self) -> TensorDict:
+        """Observation TensorDict `[B]` from the current state (all agents)."""
+        B = self.batch_size[0]
+        ep, xy, yaw = self._ep, self._pos[:, :2], self._yaw
+        past = world_to_body_2d(self._pos_hist[..., :2], xy, yaw)  # [B, T, 2]
+        goal = world_to_body_2d(self.table.goal_position[ep, None, :2], xy, yaw)[:, 0]  # [B, 2]
+        dyaw = wrap_angle(self.table.goal_yaw[ep] - yaw)
+        obs = {
+            keys.RGB: self._rgb,
+            keys.PAST_POSITIONS: past,
+            keys.GOAL_VECTOR: goal,
+            keys.GOAL_POSE: torch.cat([goal, torch.cos(dyaw)[:, None], torch.sin(dyaw)[:, None]], -1),
+            keys.GOAL_IMAGE: self._goal_images[ep],
+            keys.HAS_GOAL_IMAGE: self._has_goal_image[ep].unsqueeze(-1),
+            keys.INSTRUCTION_TOKENS: self.table.instruction_tokens[ep],
+            keys.EPISODE_INDEX: ep.unsqueeze(-1),
+            keys.STEP_COUNT: self._steps.unsqueeze(-1),
+            keys.AGENT_POSITION: self._pos,
+            keys.AGENT_YAW: yaw.unsqueeze(-1),
+            keys.DISTANCE_TO_GOAL: self._dist.unsqueeze(-1),
+            **{k: v.unsqueeze(-1) for k, v in self._flags.items()},
+        }
+        if self._depth is not None:
+            obs[keys.DEPTH] = self._depth
+        return TensorDict(obs, batch_size=[B], device=self.device)
+
+    # ------------------------------------------------------------------ navmesh boundary (scene frame)
+
+    def nav_to_scene(self, p_nav: torch.Tensor) -> torch.Tensor:
+        """`[..., 3]` nav frame -> scene frame (row vectors: p_scene = p_nav @ R_ns)."""
+        return p_nav.float() @ self._R_ns.to(p_nav.device)
+
+    def scene_to_nav(self, p_scene) -> torch.Tensor:
+        p = torch.as_tensor(p_scene, dtype=torch.float32)
+        return p @ self._R_ns.T.to(p.device)
+
+    def _move(self, start_nav: torch.Tensor, target_nav: torch.Tensor):
+        """Batched navmesh motion: -> end `[B, 3]` nav frame, collided `[B]` bool."""
+        end, collided = self.navmesh.move_along_surface(
+            self.nav_to_scene(start_nav).cpu(), self.nav_to_scene(target_nav).cpu()
+        )
+        end_nav = self.scene_to_nav(end).to(self.device)
+        return end_nav, torch.as_tensor(collided, dtype=torch.bool).reshape(-1).to(self.device)
+
+    def _navigable(self, p_nav: torch.Tensor) -> torch.Tensor:
+        ok = self.navmesh.is_navigable(self.nav_to_scene(p_nav).cpu())
+        return torch.as_tensor(ok, dtype=torch.bool).reshape(-1).to(self.device)
+
+    def _distance(self, p_nav: torch.Tensor, ep: torch.Tensor) -> torch.Tensor:
+        """Geodesic distance `[n]` from nav-frame points `[n, 3]` to their episodes' goals.
+
+        Falls back to the straight-line distance where the field has no value (inf/NaN), so a
+        metric is always finite; the navmesh motion keeps agents on the goal's island anyway.
+        """
+        g = self.field.lookup(self.nav_to_scene(p_nav).cpu(), self.table.goal_index[ep].cpu())
+        g = torch.as_tensor(g, dtype=torch.float32).to(self.device)
+        euclid = (self.table.goal_position[ep] - p_nav).norm(dim=-1)
+        return torch.where(torch.isfinite(g), g, euclid)
+
+
+def _load_navmesh(scene):
+    path = getattr(scene, "navmesh_path", None)
+    if path is None or not Path(path).is_file():
+        raise FileNotFoundError(
+            f"{getattr(scene, 'root', 'scene')}: navmesh.npz missing (Scene.navmesh_path={path}); "
+            f"prepare the scene first: python -m wanderland_nav.prepare scene=<path>"
+        )
+    from planners import NavMesh
+
+    return NavMesh.load(path)
+
+
+def _load_renderer(scene, gaussians, renderer, device):
+    from wanderland_nav.render import Gaussians, render
+
+    if gaussians is None:
+        path = getattr(scene, "gaussians_path", None)
+        if path is None or not Path(path).is_file():
+            raise FileNotFoundError(
+                f"{getattr(scene, 'root', 'scene')}: 3dgs.ply missing (Scene.gaussians_path={path}); the camera "
+                f"needs the scene's Gaussians (make or fit them: python -m wanderland_nav.fit)"
+            )
+        gaussians = Gaussians.load(path).to(device)
+    return gaussians, renderer if renderer is not None else render
