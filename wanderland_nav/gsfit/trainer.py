@@ -63,7 +63,8 @@ class DensifySettings:
     percent_dense: float = 0.01  # clone if max scale <= this x extent, else split
     split_factor: float = 1.6  # split children have scale / this
     prune_opacity: float = 0.005
-    prune_scale_extent: float = 0.1  # prune Gaussians larger than this x extent
+    prune_scale_extent: float | None = None  # prune Gaussians larger than this x extent (None: off;
+    # LiDAR init legitimately makes large splats in sparse far regions)
     max_gaussians: int = 2_000_000
 
 
@@ -327,7 +328,9 @@ class Trainer:
             high[top] = True
         clone = high & (smax <= d.percent_dense * self.extent)
         split = high & ~clone
-        prune = (torch.sigmoid(p["opacity_logits"]) < d.prune_opacity) | (smax > d.prune_scale_extent * self.extent)
+        prune = torch.sigmoid(p["opacity_logits"]) < d.prune_opacity
+        if d.prune_scale_extent is not None:
+            prune |= smax > d.prune_scale_extent * self.extent
         keep = ~(prune | split)  # split parents are replaced by their two children
         extra: dict[str, list[torch.Tensor]] = {k: [p[k][clone]] for k in PARAM_NAMES}
         if split.any():
