@@ -1,0 +1,2 @@
+"""Training algorithms over `NavEnv`: PPO (TorchRL collectors + ClipPPOLoss), behaviour cloning from
+expert episodes, atomic resumable checkpoints, and a tiny logger protocol."""

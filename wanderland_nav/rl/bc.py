@@ -1,0 +1,196 @@
+"""Behaviour cloning from expert episodes: `gt_locations` -> each policy's waypoint format.
+
+The expert is the episode's dense ground-truth path (`Episode.gt_locations`, scene frame, rotated into
+the nav frame once). At any agent pose the expert label is the next K points along that path, spaced by
+the policy's `waypoint_spacing`, starting from the agent's projection onto the path, in the agent's body
+frame (x forward, y left). Policies turn these metric waypoints into their own training targets
+(`NavPolicy.bc_loss`: CityWalker deltas + arrival, NoMaD normalised deltas for the diffusion loss,
+MBRA positions + segment headings).
+
+Data comes from the env itself, so observations are exactly what the policy will see at test time:
+round 0 rolls out the expert with Gaussian waypoint noise (to visit recovery states), later rounds are
+DAgger rounds (the learner acts with probability 1 - beta, the expert labels every state), and the
+aggregate dataset is fitted with minibatch Adam.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.envs import EnvBase
+from tqdm.auto import tqdm
+
+from policies.base import NavPolicy
+from wanderland_nav import keys as K
+from wanderland_nav.geometry import world_to_body_2d
+from wanderland_nav.rl.loggers import Logger
+
+log = logging.getLogger(__name__)
+
+
+class ExpertPaths:
+    """Dense expert paths of E episodes, nav frame, padded: `xy [E, L, 2]`, arc length `s [E, L]`."""
+
+    def __init__(self, paths_nav: Sequence[np.ndarray]):
+        if not len(paths_nav):
+            raise ValueError("ExpertPaths: no episodes")
+        lmax = max(len(p) for p in paths_nav)
+        xy = np.zeros((len(paths_nav), lmax, 2), np.float32)
+        for i, p in enumerate(paths_nav):
+            p = np.asarray(p, np.float32)
+            if p.ndim != 2 or p.shape[1] != 3 or len(p) < 1:
+                raise ValueError(f"ExpertPaths: episode {i} path must be [L>=1, 3], got {p.shape}")
+            xy[i, :len(p)] = p[:, :2]
+            xy[i, len(p):] = p[-1, :2]  # pad by repeating the goal: zero-length segments
+        self.xy = torch.from_numpy(xy)
+        seg = (self.xy[:, 1:] - self.xy[:, :-1]).norm(dim=-1)
+        self.s = torch.cat([torch.zeros(len(paths_nav), 1), seg.cumsum(1)], dim=1)  # [E, L]
+        self.length = self.s[:, -1]
+
+    @classmethod
+    def from_episodes(cls, episodes, nav_from_scene: np.ndarray) -> "ExpertPaths":
+        """Episodes' `gt_locations` (scene frame) -> nav frame (`nav_from_scene` `[3, 3]`)."""
+        r = np.asarray(nav_from_scene, np.float64)
+        return cls([np.asarray(e.gt_locations, np.float64) @ r.T for e in episodes])
+
+    def waypoints(self, agent_xy: torch.Tensor, agent_yaw: torch.Tensor, episode: torch.Tensor,
+                  num_waypoints: int, spacing: float) -> torch.Tensor:
+        """`[N, 2]` nav xy, `[N]` yaw, `[N]` episode index -> `[N, K, 2]` body-frame expert waypoints."""
+        ep = episode.long().view(-1)
+        if int(ep.max()) >= len(self.xy) or int(ep.min()) < 0:
+            raise IndexError(f"ExpertPaths: episode index {int(ep.max())} out of range ({len(self.xy)} paths)")
+        xy, s = self.xy[ep], self.s[ep]                                  # [N, L, 2], [N, L]
+        d = (xy - agent_xy[:, None, :2].float()).norm(dim=-1)           # [N, L]
+        s0 = s.gather(1, d.argmin(dim=1, keepdim=True))                 # [N, 1] arc length of the projection
+        steps = torch.arange(1, num_waypoints + 1, dtype=torch.float32) * spacing
+        tgt = torch.minimum(s0 + steps[None], self.length[ep][:, None])  # [N, K]
+        hi = torch.searchsorted(s.contiguous(), tgt.contiguous(), right=False).clamp(1, s.shape[1] - 1)
+        lo = hi - 1
+        s_lo, s_hi = s.gather(1, lo), s.gather(1, hi)
+        w = ((tgt - s_lo) / (s_hi - s_lo).clamp_min(1e-6)).clamp(0, 1)[..., None]
+        pts = xy.gather(1, lo[..., None].expand(-1, -1, 2)) * (1 - w) + xy.gather(1, hi[..., None].expand(-1, -1, 2)) * w
+        yaw = agent_yaw.view(-1).float()
+        return world_to_body_2d(pts, agent_xy[:, :2].float(), yaw)
+
+
+class ExpertActor(TensorDictModuleBase):
+    """Acts with the expert's waypoints (+ optional Gaussian noise in metres), writing `ACTION`."""
+
+    def __init__(self, paths: ExpertPaths, num_waypoints: int, spacing: float, noise_std: float = 0.0,
+                 generator: torch.Generator | None = None):
+        super().__init__()
+        self.paths, self.num_waypoints, self.spacing = paths, num_waypoints, spacing
+        self.noise_std, self.generator = noise_std, generator
+        self.in_keys = [K.AGENT_POSITION, K.AGENT_YAW, K.EPISODE_INDEX]
+        self.out_keys = [K.ACTION]
+
+    def labels(self, td: TensorDictBase) -> torch.Tensor:
+        lead = td.batch_size
+        wp = self.paths.waypoints(td.get(K.AGENT_POSITION).reshape(-1, 3), td.get(K.AGENT_YAW).reshape(-1),
+                                  td.get(K.EPISODE_INDEX).reshape(-1), self.num_waypoints, self.spacing)
+        return wp.view(*lead, self.num_waypoints, 2)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        a = self.labels(td)
+        if self.noise_std > 0:
+            a = a + self.noise_std * torch.randn(a.shape, generator=self.generator)
+        td.set(K.ACTION, a)
+        return td
+
+
+class _MixedActor(TensorDictModuleBase):
+    """DAgger behaviour: per agent and step, the expert with probability beta, else the learner's mean."""
+
+    def __init__(self, expert: ExpertActor, learner: NavPolicy, beta: float, generator: torch.Generator):
+        super().__init__()
+        self.expert, self.learner, self.beta, self.generator = expert, learner, beta, generator
+        self.in_keys = sorted(set(expert.in_keys) | set(learner.in_keys))
+        self.out_keys = [K.ACTION]
+
+    @torch.no_grad()
+    def forward(self, td):
+        a_exp = self.expert(td).get(K.ACTION).clone()
+        a_pol = self.learner.select_action(td, deterministic=True).get(K.ACTION)
+        pick = torch.rand(td.batch_size, generator=self.generator) < self.beta
+        td.set(K.ACTION, torch.where(pick[..., None, None], a_exp, a_pol))
+        return td
+
+
+@dataclass
+class BCConfig:
+    rounds: int = 3                # 1 expert round + (rounds - 1) DAgger rounds
+    env_steps_per_round: int = 60  # env.step calls per round (each gives batch_size samples)
+    updates_per_round: int = 300
+    batch_size: int = 64
+    lr: float = 3e-4
+    weight_decay: float = 1e-4
+    expert_noise: float = 0.3      # metres of waypoint noise in the expert round
+    dagger_beta: float = 0.5       # expert share in DAgger rounds (decays by half each round)
+    max_grad_norm: float = 1.0
+
+    def __post_init__(self):
+        if self.rounds < 1 or self.env_steps_per_round < 1 or self.updates_per_round < 0 or self.batch_size < 1:
+            raise ValueError(f"BCConfig: invalid sizes {self}")
+
+
+def _store_keys(policy: NavPolicy) -> list[str]:
+    return sorted(set(policy.in_keys) | {K.AGENT_POSITION, K.AGENT_YAW, K.EPISODE_INDEX, K.DISTANCE_TO_GOAL})
+
+
+def collect(env: EnvBase, actor: TensorDictModuleBase, steps: int, keys: list[str]) -> TensorDict:
+    """Roll `actor` for `steps` env steps (auto partial resets); keep root `keys`, flattened to `[N]`."""
+    with torch.no_grad():
+        roll = env.rollout(steps, actor, break_when_any_done=False, auto_reset=True)
+    present = [k for k in keys if k in roll.keys()]
+    return roll.select(*present).reshape(-1).clone()
+
+
+def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig, *, logger: Logger | None = None,
+             seed: int = 0, progress: bool = True, step_offset: int = 0) -> dict[str, float]:
+    """DAgger-style behaviour cloning in `env`; returns the last round's mean losses."""
+    g = torch.Generator().manual_seed(seed)
+    spacing = float(policy.waypoint_spacing)
+    expert = ExpertActor(paths, policy.num_waypoints, spacing, cfg.expert_noise, generator=g)
+    labeler = ExpertActor(paths, policy.num_waypoints, spacing)
+    keys = _store_keys(policy)
+    opt = torch.optim.AdamW(policy.trainable_parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    data: TensorDict | None = None
+    stats: dict[str, float] = {}
+    pbar = tqdm(total=cfg.rounds * cfg.updates_per_round, desc="BC", disable=not progress, dynamic_ncols=True)
+    env.set_seed(seed)
+    step = step_offset
+    for r in range(cfg.rounds):
+        policy.eval()
+        actor = expert if r == 0 else _MixedActor(labeler, policy, cfg.dagger_beta * 0.5 ** (r - 1), g)
+        new = collect(env, actor, cfg.env_steps_per_round, keys)
+        new.set("_label", labeler.labels(new))   # private, never leaves this function
+        data = new if data is None else torch.cat([data, new], 0)
+        policy.train()
+        sums: dict[str, float] = {}
+        for _ in range(cfg.updates_per_round):
+            idx = torch.randint(0, data.shape[0], (min(cfg.batch_size, data.shape[0]),), generator=g)
+            mb = data[idx]
+            loss, metrics = policy.bc_loss(mb.exclude("_label"), mb.get("_label"))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(policy.trainable_parameters(), cfg.max_grad_norm)
+            opt.step()
+            metrics = {"bc/loss": float(loss.detach()), **{f"bc/{k}": v for k, v in metrics.items()}}
+            for k, v in metrics.items():
+                sums[k] = sums.get(k, 0.0) + v
+            step += 1
+            pbar.update(1)
+            pbar.set_postfix(loss=f"{metrics['bc/loss']:.3f}", round=r)
+        stats = {k: v / max(cfg.updates_per_round, 1) for k, v in sums.items()}
+        stats["bc/dataset"] = data.shape[0]
+        if logger is not None:
+            logger.log_scalars(stats, step)
+    pbar.close()
+    policy.eval()
+    return stats

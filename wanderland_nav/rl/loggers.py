@@ -1,0 +1,83 @@
+"""A tiny logger protocol, and the console/CSV logger.
+
+Scalars are logged under TorchRL-recipe groups: `train/`, `eval/`, `losses/`, `time/`. Other loggers
+(rerun, in `wanderland_nav.viz`) implement the same three methods and are chosen by `make_logger`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import math
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+from wanderland_nav.atomic import atomic_write_text
+
+log = logging.getLogger(__name__)
+
+
+@runtime_checkable
+class Logger(Protocol):
+    def log_scalars(self, scalars: dict[str, float], step: int) -> None: ...
+
+    def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
+        """A TensorDict `[B, T]` of transitions (positions, actions, images...) for loggers that can
+        show trajectories; scalar-only loggers ignore it."""
+
+    def close(self) -> None: ...
+
+
+class ConsoleCSVLogger:
+    """Prints a compact line per call (every `print_every` steps) and keeps `metrics.csv` (long format:
+    `step,key,value`) up to date. The CSV is rewritten atomically each `flush_every` calls and at
+    `close()`, so a killed run leaves a complete (if slightly stale) file, never a torn one."""
+
+    def __init__(self, out_dir: str | Path | None, *, print_every: int = 1, flush_every: int = 1,
+                 console: bool = True):
+        self.path = Path(out_dir) / "metrics.csv" if out_dir is not None else None
+        self.rows: list[tuple[int, str, float]] = []
+        if self.path is not None and self.path.exists():  # resume: keep what the earlier run logged
+            with self.path.open() as f:
+                self.rows = [(int(r["step"]), r["key"], float(r["value"])) for r in csv.DictReader(f)]
+        self.print_every, self.flush_every, self.console = print_every, flush_every, console
+        self._calls = 0
+
+    def log_scalars(self, scalars: dict[str, float], step: int) -> None:
+        clean = {k: float(v) for k, v in scalars.items() if v is not None and math.isfinite(float(v))}
+        self.rows.extend((int(step), k, v) for k, v in clean.items())
+        self._calls += 1
+        if self.console and self._calls % self.print_every == 0 and clean:
+            log.info("step %d | %s", step, " ".join(f"{k}={v:.4g}" for k, v in sorted(clean.items())))
+        if self._calls % self.flush_every == 0:
+            self.flush()
+
+    def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
+        return None
+
+    def flush(self) -> None:
+        if self.path is None:
+            return
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["step", "key", "value"])
+        w.writerows(self.rows)
+        atomic_write_text(self.path, buf.getvalue())
+
+    def close(self) -> None:
+        self.flush()
+
+
+def make_logger(kind: str, out_dir: str | Path | None, **kwargs) -> Logger:
+    """`"console"` (console + CSV) or `"rerun"` (provided by `wanderland_nav.viz`)."""
+    if kind in ("console", "csv"):
+        return ConsoleCSVLogger(out_dir, **kwargs)
+    if kind == "rerun":
+        try:
+            from wanderland_nav.viz import RerunLogger  # the viz package owns rerun
+        except ImportError as e:
+            raise ImportError("logger=rerun needs wanderland_nav.viz.RerunLogger, which is not available: "
+                              f"{e}") from e
+        return RerunLogger(out_dir, **kwargs)
+    raise ValueError(f"unknown logger {kind!r}; expected 'console' or 'rerun'")

@@ -1,0 +1,241 @@
+"""PPO over `NavEnv` with TorchRL: a collector, GAE (gamma 0.99), `ClipPPOLoss`, minibatch epochs.
+
+The loop (`PPOTrainer.train`) reads top to bottom like a CleanRL/TorchRL recipe:
+
+    for batch in collector:                       # [B, T] transitions from the current policy
+        GAE(batch)                                # advantage + value_target, no grad
+        for epoch: for minibatch: ClipPPOLoss -> clip grads -> Adam step
+        log train/ losses/ time/ ; checkpoint atomically ; update collector weights
+
+The actor is the policy wrapped in a `ProbabilisticActor` with `WaypointNormal` (independent Normal over
+the `[K, 2]` waypoints; see `policies.base`). The critic is the policy's value head on no-grad trunk
+features (`NavPolicy.value`), and the loss uses `separate_losses=True`, so the critic loss never
+reaches the shared trunk: RL fine-tuning changes the policy, as the paper does, not the features.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.envs import EnvBase
+from torchrl.modules import ProbabilisticActor
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+from tqdm.auto import tqdm
+
+from policies.base import NavPolicy, WaypointNormal
+from wanderland_nav import keys as K
+from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
+from wanderland_nav.rl.loggers import Logger
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class PPOConfig:
+    total_frames: int = 12_000         # env steps summed over the batch
+    frames_per_batch: int = 400        # per collector iteration
+    epochs: int = 4
+    minibatch_size: int = 100
+    lr: float = 1e-4
+    gamma: float = 0.99                # the paper's
+    lmbda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coeff: float = 0.0
+    critic_coeff: float = 0.5
+    max_grad_norm: float = 0.5
+    normalize_advantage: bool = True
+    target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
+
+    def __post_init__(self):
+        if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
+            raise ValueError(f"PPO: need 0 < frames_per_batch ({self.frames_per_batch}) <= total_frames "
+                             f"({self.total_frames})")
+        if not 0 < self.minibatch_size <= self.frames_per_batch:
+            raise ValueError(f"PPO: minibatch_size={self.minibatch_size} must be in (0, frames_per_batch]")
+
+
+class ValueModule(TensorDictModuleBase):
+    """The critic: `policy.value(td)` (value head over no-grad trunk features) as a TensorDict module."""
+
+    def __init__(self, policy: NavPolicy):
+        super().__init__()
+        self.policy = policy
+        self.in_keys = list(policy.in_keys)
+        self.out_keys = [K.STATE_VALUE]
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        return self.policy.value(td)
+
+
+def make_actor(policy: NavPolicy) -> ProbabilisticActor:
+    """Policy -> stochastic actor writing `ACTION` and `ACTION_LOG_PROB` (used by the collector and loss)."""
+    return ProbabilisticActor(
+        module=policy,
+        in_keys={"loc": K.LOC, "scale": K.SCALE},
+        out_keys=[K.ACTION],
+        distribution_class=WaypointNormal,
+        return_log_prob=True,
+        log_prob_key=K.ACTION_LOG_PROB,
+    )
+
+
+def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: int, total_frames: int,
+                   num_workers: int = 1, seed: int = 0):
+    """One process (`Collector`) or `num_workers` synchronous processes (`MultiSyncCollector`)."""
+    if num_workers <= 1:
+        c = Collector(env_fn, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
+                      split_trajs=False)
+    else:
+        c = MultiSyncCollector([env_fn] * num_workers, actor, frames_per_batch=frames_per_batch,
+                               total_frames=total_frames, split_trajs=False)
+    c.set_seed(seed)
+    return c
+
+
+def episode_stats(batch: TensorDictBase) -> dict[str, float]:
+    """SR / IR / NE / return over the episodes that ended inside a collected batch `[..., T]`."""
+    nxt = batch.get("next")
+    done = nxt.get(K.DONE).squeeze(-1)
+    out = {"train/reward_mean": float(nxt.get(K.REWARD).mean())}
+    n = int(done.sum())
+    out["train/episodes"] = n
+    if n:
+        if K.SUCCESS in nxt.keys():
+            out["train/SR"] = float(nxt.get(K.SUCCESS).squeeze(-1)[done].float().mean())
+        if K.INTERVENTION in nxt.keys():
+            out["train/IR"] = float(nxt.get(K.INTERVENTION).squeeze(-1)[done].float().mean())
+        if K.DISTANCE_TO_GOAL in nxt.keys():
+            out["train/NE"] = float(nxt.get(K.DISTANCE_TO_GOAL).squeeze(-1)[done].mean())
+    return out
+
+
+class PPOTrainer:
+    """Owns the actor, critic, loss, optimiser and the loop; resumes from `checkpointer.last`."""
+
+    def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase], cfg: PPOConfig, *,
+                 logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
+                 seed: int = 0, config_dict: dict | None = None, progress: bool = True):
+        self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
+        self.logger, self.checkpointer = logger, checkpointer
+        self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
+        self.actor = make_actor(policy)
+        self.critic = ValueModule(policy)
+        self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=cfg.clip_epsilon,
+                                entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
+                                critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
+                                normalize_advantage=cfg.normalize_advantage, separate_losses=True)
+        self.loss.set_keys(action=K.ACTION, sample_log_prob=K.ACTION_LOG_PROB, value=K.STATE_VALUE,
+                           reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
+        self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=self.critic, average_gae=False,
+                       deactivate_vmap=True)  # conv + GroupNorm are not vmap-able
+        self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
+        self.optim = torch.optim.Adam(policy.trainable_parameters(), lr=cfg.lr)
+        self.iteration, self.frames = 0, 0
+
+    # -------------------------------------------------------------- checkpoints
+    def state_counters(self) -> dict[str, int]:
+        return {"ppo_iteration": self.iteration, "ppo_frames": self.frames}
+
+    def save(self, phase: str = "ppo") -> None:
+        if self.checkpointer is not None:
+            self.checkpointer.save(self.iteration, policy=self.policy, optimizer=self.optim,
+                                   counters=self.state_counters(), config=self.config_dict, phase=phase)
+
+    def restore(self, ckpt: dict) -> None:
+        self.policy.load_state_dict(ckpt["policy"])
+        if ckpt.get("optimizer") is not None and ckpt.get("phase") in ("ppo", "ppo_done"):
+            self.optim.load_state_dict(ckpt["optimizer"])
+        self.iteration = int(ckpt["counters"].get("ppo_iteration", 0))
+        self.frames = int(ckpt["counters"].get("ppo_frames", 0))
+        if ckpt.get("rng") is not None:
+            set_rng_state(ckpt["rng"])
+
+    # -------------------------------------------------------------- one update
+    def update(self, batch: TensorDictBase) -> dict[str, float]:
+        cfg = self.cfg
+        # the actor also wrote STATE_VALUE at the root (not in "next"): drop it so GAE recomputes both
+        batch = batch.exclude(K.STATE_VALUE)
+        with torch.no_grad():
+            self.gae(batch)
+        flat = batch.reshape(-1)
+        n = flat.shape[0]
+        sums: dict[str, float] = {}
+        count = 0
+        stop = False
+        for epoch in range(cfg.epochs):
+            perm = torch.randperm(n)
+            for start in range(0, n - cfg.minibatch_size + 1, cfg.minibatch_size):
+                mb = flat[perm[start:start + cfg.minibatch_size]]
+                out = self.loss(mb)
+                total = out["loss_objective"] + out["loss_critic"] + out.get("loss_entropy", 0.0)
+                self.optim.zero_grad(set_to_none=True)
+                total.backward()
+                gn = torch.nn.utils.clip_grad_norm_(self.policy.trainable_parameters(), cfg.max_grad_norm)
+                self.optim.step()
+                stats = {
+                    "losses/objective": out["loss_objective"], "losses/critic": out["loss_critic"],
+                    "losses/approx_kl": out["kl_approx"], "losses/clipfrac": out["clip_fraction"],
+                    "losses/explained_variance": out.get("explained_variance", torch.tensor(float("nan"))),
+                    "losses/entropy": out.get("entropy", torch.tensor(float("nan"))), "losses/grad_norm": gn,
+                }
+                for k, v in stats.items():
+                    sums[k] = sums.get(k, 0.0) + float(torch.as_tensor(v).detach().float().mean())
+                count += 1
+                if cfg.target_kl is not None and float(out["kl_approx"].detach().abs().mean()) > cfg.target_kl:
+                    stop = True
+                    break
+            if stop:
+                break
+        res = {k: v / max(count, 1) for k, v in sums.items()}
+        res["losses/epochs_done"] = epoch + 1
+        res["losses/std_mean"] = float(self.policy.scale().detach().mean())
+        return res
+
+    # -------------------------------------------------------------- the loop
+    def train(self) -> dict[str, float]:
+        cfg = self.cfg
+        remaining = cfg.total_frames - self.frames
+        if remaining < cfg.frames_per_batch:
+            log.info("PPO already complete (%d/%d frames)", self.frames, cfg.total_frames)
+            return {}
+        collector = make_collector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
+                                   total_frames=remaining, num_workers=self.num_workers,
+                                   seed=self.seed + 1000 * self.iteration)
+        pbar = tqdm(total=cfg.total_frames, initial=self.frames, desc="PPO", unit="f", disable=not self.progress,
+                    dynamic_ncols=True)
+        last: dict[str, float] = {}
+        t_collect = time.perf_counter()
+        try:
+            for batch in collector:
+                dt_collect = time.perf_counter() - t_collect
+                t0 = time.perf_counter()
+                self.policy.train()
+                stats = episode_stats(batch)
+                stats.update(self.update(batch))
+                dt_update = time.perf_counter() - t0
+                self.frames += batch.numel()
+                self.iteration += 1
+                collector.update_policy_weights_()
+                stats.update({"time/collect_s": dt_collect, "time/update_s": dt_update,
+                              "time/fps": batch.numel() / max(dt_collect + dt_update, 1e-9),
+                              "time/collect_fps": batch.numel() / max(dt_collect, 1e-9),
+                              "train/frames": self.frames, "train/iteration": self.iteration})
+                self.logger.log_scalars(stats, self.frames)
+                self.save("ppo" if self.frames + cfg.frames_per_batch <= cfg.total_frames else "ppo_done")
+                pbar.update(batch.numel())
+                pbar.set_postfix({k.split("/")[1]: f"{stats[k]:.3g}" for k in
+                                  ("train/SR", "train/reward_mean", "losses/approx_kl", "time/fps") if k in stats})
+                last = stats
+                t_collect = time.perf_counter()
+        finally:
+            pbar.close()
+            collector.shutdown()
+        return last
