@@ -16,7 +16,7 @@ from wanderland_nav.scene.model import Camera, Scene
 
 def _scene(root, n_cams=10, w=40, h=30, n_points=300):
     g = np.random.default_rng(0)
-    K = np.array([[30.0, 0, 19.5], [0, 30.0, 14.5], [0, 0, 1]])
+    K = np.array([[30.0, 0, 20.0], [0, 30.0, 15.0], [0, 0, 1]])
     cams = []
     for i in range(n_cams):
         T = np.eye(4)
@@ -41,7 +41,7 @@ def test_views_resize_intrinsics_and_splits(tmp_path):
     K = sc.cameras[0].K
     K2 = scaled_intrinsics(K, 0.5, 0.5)
     # the image centre maps to the image centre
-    assert np.allclose(K2[:2, 2], [(40 / 2) * 0.5 - 0.5, (30 / 2) * 0.5 - 0.5]) and K2[0, 0] == 15.0
+    assert np.allclose(K2[:2, 2], [10.0, 7.5]) and K2[0, 0] == 15.0 and K2[1, 1] == 15.0
     assert target_size(40, 30, 1.0, 20) == (20, 15) and target_size(40, 30, 2.0, None) == (20, 15)
     v = load_view(sc.cameras[0], max_width=20)
     assert v.image.shape == (15, 20, 3) and v.mask.shape == (15, 20, 1) and v.mask.dtype == torch.bool

@@ -39,14 +39,12 @@ class View:
 
 
 def scaled_intrinsics(K: np.ndarray, sx: float, sy: float) -> np.ndarray:
-    """Intrinsics after resizing by (sx, sy), pixel centres at half-integers (OpenCV convention)."""
-    K2 = np.array(K, dtype=np.float64, copy=True)
-    K2[0, 0] *= sx
-    K2[0, 1] *= sx
-    K2[1, 1] *= sy
-    K2[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
-    K2[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-    return K2
+    """Intrinsics after resizing by (sx, sy): K' = diag(sx, sy, 1) K.
+
+    COLMAP / gsplat convention: pixel i covers [i, i+1) and its centre is i + 0.5 (the demo and
+    Wanderland write cx = W / 2), so continuous image coordinates simply scale.
+    """
+    return np.diag([sx, sy, 1.0]) @ np.asarray(K, dtype=np.float64)
 
 
 def target_size(width: int, height: int, downscale: float, max_width: int | None) -> tuple[int, int]:
