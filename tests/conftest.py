@@ -24,3 +24,11 @@ def shared_data() -> Path:
     """The real test data beside the checkout. Missing data is a failure, not a skip."""
     assert SHARED_DATA.is_dir(), f"real test data not found at {SHARED_DATA} (set WANDERLAND_SHARED_DATA)"
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def tiny_demo_scene(tmp_path_factory) -> Path:
+    """The procedural demo block, preset "tiny" (seed 0): v1 layout, -Y up, built once per session (~1-2 s)."""
+    from wanderland_nav.scene.demo import make_demo_scene
+
+    return make_demo_scene(tmp_path_factory.mktemp("demo") / "demo_tiny", seed=0, preset="tiny")
