@@ -32,3 +32,20 @@ def tiny_demo_scene(tmp_path_factory) -> Path:
     from wanderland_nav.scene.demo import make_demo_scene
 
     return make_demo_scene(tmp_path_factory.mktemp("demo") / "demo_tiny", seed=0, preset="tiny")
+
+
+@pytest.fixture(scope="session")
+def demo_episodes(prepared_demo_scene) -> Path:
+    """(EXPERT) `episodes.json` for the prepared tiny demo: 8 episodes, seed 0, 64x48 goal images.
+
+    Written into the scene folder (goal images under `goal_images/`), so `load_scene` sees it.
+    """
+    from planners import NavMesh
+    from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+    from wanderland_nav.scene import load_scene
+
+    scene = load_scene(prepared_demo_scene)
+    out = Path(prepared_demo_scene) / "episodes.json"
+    write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=8, seed=0,
+                         settings=GeneratorSettings(goal_image_width=64, goal_image_height=48))
+    return out
