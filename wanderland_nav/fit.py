@@ -66,9 +66,17 @@ def run_fit(cfg: dict) -> dict:
     trainer = Trainer(scene, out_dir, fit_cfg, log_fn=log_fn, resume=bool(cfg.get("resume", True)),
                       progress=bool(cfg.get("progress", True)))
     results: dict = {"config": cfg}
+    lpips = None
+    lp = cfg.get("lpips") or {}
+    if lp.get("backbone_path") and lp.get("lin_path"):
+        from wanderland_nav.gsfit.lpips import LPIPS
+
+        lpips = LPIPS.from_files(lp["backbone_path"], lp["lin_path"])
+    else:
+        log.info("LPIPS off: set lpips.backbone_path and lpips.lin_path to local AlexNet/LPIPS weights")
     if cfg.get("evaluate", True):
         results["init"] = evaluate_splits(trainer.initial_gaussians, trainer.views, trainer.render_fn,
-                                          background=fit_cfg.background)
+                                          background=fit_cfg.background, lpips=lpips)
     results["train"] = trainer.train()
     if rows:
         prev = metrics_log.read_text() if metrics_log.exists() else ""
@@ -78,7 +86,7 @@ def run_fit(cfg: dict) -> dict:
         results["exported_to"] = str(trainer.export(Path(scene.root) / "3dgs.ply"))
     if cfg.get("evaluate", True):
         results["fitted"] = evaluate_splits(trainer.gaussians().detach(), trainer.views, trainer.render_fn,
-                                            background=fit_cfg.background)
+                                            background=fit_cfg.background, lpips=lpips)
         table = format_table({"LiDAR init": results["init"], "fitted": results["fitted"]},
                              splits=("train", "interp", "extrap"))
         results["table"] = table

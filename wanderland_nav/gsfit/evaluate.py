@@ -6,7 +6,9 @@ show why geometry (LiDAR init + depth prior) matters: photometric fitting alone 
 well and extrapolates badly.
 
 PSNR and SSIM are computed on valid pixels only (images_mask/), per view, then averaged over
-views (the usual convention: mean of per-image PSNR, not PSNR of the pooled MSE).
+views (the usual convention: mean of per-image PSNR, not PSNR of the pooled MSE). LPIPS is added
+when an `LPIPS` module (built from the user's local weights) is passed; invalid pixels are
+replaced by the target for it, so they contribute no difference.
 """
 
 from __future__ import annotations
@@ -42,38 +44,46 @@ def render_views(gaussians, views: Sequence[View], render_fn: Callable, *,
     return out  # type: ignore[return-value]
 
 
+@torch.no_grad()
 def evaluate_views(gaussians, views: Sequence[View], render_fn: Callable, *,
-                   background=(0.0, 0.0, 0.0)) -> dict:
-    """{"psnr", "ssim", "n", "per_view": {name: {"psnr", "ssim"}}}; NaN means when no views."""
+                   background=(0.0, 0.0, 0.0), lpips=None) -> dict:
+    """{"psnr", "ssim", ["lpips"], "n", "per_view": {name: {...}}}; NaN means when no views."""
+    keys = ("psnr", "ssim") + (("lpips",) if lpips is not None else ())
     if not views:
-        return {"psnr": math.nan, "ssim": math.nan, "n": 0, "per_view": {}}
+        return {**{k: math.nan for k in keys}, "n": 0, "per_view": {}}
     rgbs = render_views(gaussians, views, render_fn, background=background)
     per = {}
     for v, rgb in zip(views, rgbs):
-        p = float(psnr(rgb[None], v.image[None], v.mask[None])[0])
-        s = float(ssim(rgb[None], v.image[None], v.mask[None])[0])
-        per[v.name] = {"psnr": p, "ssim": s}
-    ps = [r["psnr"] for r in per.values()]
-    ss = [r["ssim"] for r in per.values()]
-    return {"psnr": sum(ps) / len(ps), "ssim": sum(ss) / len(ss), "n": len(per), "per_view": per}
+        r = {"psnr": float(psnr(rgb[None], v.image[None], v.mask[None])[0]),
+             "ssim": float(ssim(rgb[None], v.image[None], v.mask[None])[0])}
+        if lpips is not None:
+            pred = torch.where(v.mask, rgb, v.image)
+            r["lpips"] = float(lpips(pred[None], v.image[None])[0])
+        per[v.name] = r
+    out = {k: sum(r[k] for r in per.values()) / len(per) for k in keys}
+    return {**out, "n": len(per), "per_view": per}
 
 
 def evaluate_splits(gaussians, views: dict[str, Sequence[View]], render_fn: Callable, *,
-                    splits=("train", "interp", "extrap"), background=(0.0, 0.0, 0.0)) -> dict[str, dict]:
-    return {s: evaluate_views(gaussians, views.get(s, []), render_fn, background=background) for s in splits}
+                    splits=("train", "interp", "extrap"), background=(0.0, 0.0, 0.0),
+                    lpips=None) -> dict[str, dict]:
+    return {s: evaluate_views(gaussians, views.get(s, []), render_fn, background=background, lpips=lpips)
+            for s in splits}
 
 
 def format_table(rows: dict[str, dict[str, dict]], splits=("interp", "extrap")) -> str:
-    """Markdown table: one row per model label, PSNR / SSIM per split (Table 2 layout)."""
+    """Markdown table: one row per model label, PSNR / SSIM (/ LPIPS) per split (Table 2 layout)."""
     names = {"train": "Train", "interp": "Interpolated", "extrap": "Extrapolated"}
-    head = "| model | " + " | ".join(f"{names.get(s, s)} PSNR | {names.get(s, s)} SSIM" for s in splits) + " |"
-    sep = "|---|" + "---|---|" * len(splits)
-    lines = [head, sep]
+    metrics = [("psnr", "PSNR", "{:.2f}"), ("ssim", "SSIM", "{:.4f}")]
+    if any("lpips" in res.get(s, {}) for res in rows.values() for s in splits):
+        metrics.append(("lpips", "LPIPS", "{:.4f}"))
+    head = "| model | " + " | ".join(f"{names.get(s, s)} {m[1]}" for s in splits for m in metrics) + " |"
+    lines = [head, "|---|" + "---|" * (len(splits) * len(metrics))]
     for label, res in rows.items():
-        cells = []
-        for s in splits:
-            r = res.get(s, {})
-            cells += [f"{r.get('psnr', math.nan):.2f}", f"{r.get('ssim', math.nan):.4f}"]
+        cells = [fmt.format(res.get(s, {}).get(k, math.nan)) for s in splits for k, _, fmt in metrics]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    views = ", ".join(f"{names.get(s, s)}: {next(iter(rows.values())).get(s, {}).get('n', 0)} views" for s in splits) if rows else ""
-    return "\n".join(lines) + (f"\n\n({views})" if views else "")
+    if rows:
+        first = next(iter(rows.values()))
+        lines.append("")
+        lines.append("(" + ", ".join(f"{names.get(s, s)}: {first.get(s, {}).get('n', 0)} views" for s in splits) + ")")
+    return "\n".join(lines)
