@@ -47,7 +47,7 @@ class CollisionSettings:
     """Parameters of `extract_collision_mesh` (metres). Hashable: the pipeline stores them beside
     the mesh to decide whether it is up to date."""
 
-    voxel_size: float = 0.1
+    voxel_size: float = 0.15
     crop_radius: float = 15.0  # horizontal distance to the nearest capture position
     height_band: tuple[float, float] = (-4.0, 4.0)  # along up, relative to that position's height
     min_component_faces: int = 50
@@ -59,6 +59,13 @@ class CollisionSettings:
     def as_dict(self) -> dict:
         d = asdict(self)
         d["height_band"] = list(self.height_band)
+        return d
+
+    def result_dict(self) -> dict:
+        """The fields that change the mesh (slab/chunk sizes only change speed and memory)."""
+        d = self.as_dict()
+        d.pop("slab_voxels")
+        d.pop("chunk_points")
         return d
 
 
@@ -150,7 +157,7 @@ def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int) 
     return verts[used], remap[faces]
 
 
-def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.1,
+def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,
                            crop_radius: float = 15.0, height_band: tuple[float, float] = (-4.0, 4.0),
                            min_component_faces: int = 50, *, settings: CollisionSettings | None = None,
                            ) -> trimesh.Trimesh:

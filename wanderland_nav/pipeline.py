@@ -1,0 +1,169 @@
+"""Scene preparation: scene folder -> `collision_mesh.ply` -> `navmesh.npz`, cached and idempotent.
+
+Each artefact gets a JSON sidecar (`collision_mesh.json`, `navmesh.json`) holding the hash of the
+settings that produced it, the inputs it was built from and summary figures. A step is skipped
+when its output exists, is at least as new as every input, and the stored hash matches the
+current settings, so re-running `prepare` is free and changing one setting rebuilds only what
+depends on it. All files are written atomically (`wanderland_nav.atomic`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from wanderland_nav.atomic import atomic_path, atomic_write_json
+from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
+from wanderland_nav.scene.loader import load_scene
+from wanderland_nav.scene.model import Scene
+
+log = logging.getLogger(__name__)
+
+COLLISION_MESH = "collision_mesh.ply"
+NAVMESH = "navmesh.npz"
+_FORMAT = 1  # bump when the meaning of an artefact changes, so stale caches rebuild
+
+
+def _hash(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _sidecar(path: Path) -> Path:
+    return path.with_suffix(".json")
+
+
+def _read_sidecar(path: Path) -> dict | None:
+    p = _sidecar(path)
+    if not p.is_file():
+        return None
+    try:
+        return json.loads(p.read_text())
+    except (json.JSONDecodeError, OSError):
+        return None
+
+
+def scene_inputs(root: Path) -> list[Path]:
+    """Files whose change invalidates the collision mesh (points, poses, up axis)."""
+    root = Path(root)
+    cands = [root / "raw_pcd.ply", root / "scene.ply", root / "scene_meta.json", root / "transforms.json"]
+    for d in (root / "sparse" / "0", root / "sparse", root / "lidar"):
+        if d.is_dir():
+            cands += [p for p in d.iterdir() if p.is_file()]
+    return sorted(p for p in cands if p.is_file())
+
+
+def _up_to_date(output: Path, inputs: list[Path], settings_hash: str) -> bool:
+    if not output.is_file():
+        return False
+    side = _read_sidecar(output)
+    if side is None or side.get("settings_hash") != settings_hash:
+        return False
+    t_out = output.stat().st_mtime
+    return all(p.stat().st_mtime <= t_out for p in inputs)
+
+
+def capture_positions(scene: Scene) -> np.ndarray:
+    """Scene-frame positions `[M,3]` of the capture trajectory: camera centres, else the v2
+    `lidar/poses.txt` sensor positions, else none (the cloud is then used uncropped)."""
+    if scene.cameras:
+        return scene.camera_centers()
+    poses = scene.root / "lidar" / "poses.txt"
+    if poses.is_file():
+        rows = np.loadtxt(poses, ndmin=2)
+        return rows.reshape(-1, 3, 4)[:, :, 3]
+    return np.zeros((0, 3))
+
+
+def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bool = False) -> tuple[Path, dict]:
+    """Write `collision_mesh.ply` (+ sidecar) for `scene` unless up to date. Returns (path, sidecar)."""
+    out = scene.root / COLLISION_MESH
+    inputs = scene_inputs(scene.root)
+    h = _hash({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
+    if not force and _up_to_date(out, inputs, h):
+        log.info("%s is up to date", out)
+        side = _read_sidecar(out)
+        side["skipped"] = True
+        return out, side
+    t0 = time.perf_counter()
+    mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
+    meta = mesh.metadata.pop("collision")
+    with atomic_path(out) as tmp:
+        mesh.export(tmp, file_type="ply")
+    side = {"settings_hash": h, "settings": settings.as_dict(), "up_axis": scene.up_axis,
+            "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
+            "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
+            "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
+            "skipped": False}
+    atomic_write_json(_sidecar(out), side)
+    return out, side
+
+
+def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tuple[Path, dict]:
+    """Bake `navmesh.npz` from `collision_mesh.ply` with `planners.NavMesh` unless up to date."""
+    from planners import NavMesh, NavMeshSettings  # planners depends on scene, never the reverse
+
+    settings = navmesh_settings if navmesh_settings is not None else NavMeshSettings(up_axis=scene.up_axis)
+    if settings.up_axis != scene.up_axis:
+        log.info("navmesh up_axis %s replaced by the scene's %s (%s)", settings.up_axis, scene.up_axis,
+                 scene.up_axis_source)
+        settings = dataclasses.replace(settings, up_axis=scene.up_axis)
+    cm = scene.root / COLLISION_MESH
+    out = scene.root / NAVMESH
+    cm_side = _read_sidecar(cm) or {}
+    h = _hash({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
+    if not force and _up_to_date(out, [cm], h):
+        log.info("%s is up to date", out)
+        side = _read_sidecar(out)
+        side["skipped"] = True
+        return out, side
+    t0 = time.perf_counter()
+    mesh = trimesh.load(cm, file_type="ply", process=False, force="mesh")
+    nm = NavMesh.bake(mesh, settings)
+    t_bake = time.perf_counter() - t0
+    nm.save(out)  # NavMesh.save writes atomically
+    islands = _island_summary(nm)
+    side = {"settings_hash": h, "settings": settings.to_dict(), "collision_settings_hash": cm_side.get("settings_hash"),
+            "islands": islands, "num_islands": len(islands), "area_m2": float(sum(i["area"] for i in islands)),
+            "timings": {"bake_s": t_bake, "total_s": time.perf_counter() - t0}, "skipped": False}
+    atomic_write_json(_sidecar(out), side)
+    return out, side
+
+
+def _island_summary(nm) -> list[dict]:
+    out = []
+    for isl in getattr(nm, "islands", []) or []:
+        get = (lambda k: isl.get(k)) if isinstance(isl, dict) else (lambda k: getattr(isl, k, None))
+        out.append({"id": int(get("id")) if get("id") is not None else len(out),
+                    "area": float(get("area") or 0.0), "radius": float(get("radius") or 0.0)})
+    return out
+
+
+def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = CollisionSettings(),
+                  navmesh=None, up_axis: str | None = None, bake_navmesh: bool = True) -> Scene:
+    """Collision mesh then navmesh beside the scene (skipping what is up to date); returns the
+    Scene (loaded once, output paths filled in) with `scene.meta["prepare"]` = the two sidecars (figures, timings, skipped flags)."""
+    scene = load_scene(path, up_axis=up_axis)
+    cm_path, cm_side = build_collision_mesh(scene, collision, force=force)
+    scene.collision_mesh_path = cm_path  # the loaded scene is otherwise unchanged: no second read
+    report = {"collision_mesh": cm_side}
+    if bake_navmesh:
+        nm_path, nm_side = build_navmesh(scene, navmesh, force=force)
+        scene.navmesh_path = nm_path
+        report["navmesh"] = nm_side
+    scene.meta = {**scene.meta, "prepare": report}
+    return scene
+
+
+def ensure_demo_scene(path, seed: int = 0, preset: str = "default", **prepare_kwargs) -> Scene:
+    """Make the procedural demo scene at `path` if missing (idempotent), then prepare it."""
+    from wanderland_nav.scene import make_demo_scene
+
+    make_demo_scene(Path(path), seed=seed, preset=preset)
+    return prepare_scene(path, **prepare_kwargs)
