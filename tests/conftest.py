@@ -35,6 +35,24 @@ def tiny_demo_scene(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
+    """(SCENE) A copy of the tiny demo with `collision_mesh.ply` + `navmesh.npz` from `prepare_scene`.
+
+    Copied so the demo fixture's own folder stays as `make_demo_scene` wrote it. Collision voxels
+    of 0.2 m (test size); navmesh with the default `NavMeshSettings` (up axis from the scene).
+    """
+    import shutil
+
+    from wanderland_nav.pipeline import prepare_scene
+    from wanderland_nav.scene.collision import CollisionSettings
+
+    dst = tmp_path_factory.mktemp("prepared") / Path(tiny_demo_scene).name
+    shutil.copytree(tiny_demo_scene, dst)
+    prepare_scene(dst, collision=CollisionSettings(voxel_size=0.2))
+    return dst
+
+
+@pytest.fixture(scope="session")
 def demo_episodes(prepared_demo_scene) -> Path:
     """(EXPERT) `episodes.json` for the prepared tiny demo: 8 episodes, seed 0, 64x48 goal images.
 
