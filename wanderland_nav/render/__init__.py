@@ -5,7 +5,9 @@ swapped in; `render(gaussians, cam_from_world, K, width, height)` is the thin ca
 framework uses.
 """
 
+from .api import RenderOutput, rasterization, render
 from .gaussians import Gaussians
 from .ply import PlyError
+from .sh import spherical_harmonics
 
-__all__ = ["Gaussians", "PlyError"]
+__all__ = ["Gaussians", "PlyError", "RenderOutput", "rasterization", "render", "spherical_harmonics"]
