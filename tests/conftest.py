@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
+# pytest puts tests/ on sys.path, where tests/policies (and tests/planners) would shadow the editable-installed
+# top-level packages as namespace packages; the checkout itself must come first.
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
 SHARED_DATA = Path(os.environ.get("WANDERLAND_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
@@ -54,9 +59,10 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def demo_episodes(prepared_demo_scene) -> Path:
-    """(EXPERT) `episodes.json` for the prepared tiny demo: 8 episodes, seed 0, 64x48 goal images.
+    """(EXPERT) `episodes.json` for the prepared tiny demo: 8 episodes, seed 0, no goal images
+    (the CPU renderer costs seconds per view; tests/episodes renders its own few).
 
-    Written into the scene folder (goal images under `goal_images/`), so `load_scene` sees it.
+    Written into the scene folder, so `load_scene` sees it.
     """
     from planners import NavMesh
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
@@ -65,5 +71,5 @@ def demo_episodes(prepared_demo_scene) -> Path:
     scene = load_scene(prepared_demo_scene)
     out = Path(prepared_demo_scene) / "episodes.json"
     write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=8, seed=0,
-                         settings=GeneratorSettings(goal_image_width=64, goal_image_height=48))
+                         settings=GeneratorSettings(goal_images=False))
     return out
