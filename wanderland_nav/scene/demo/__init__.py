@@ -56,11 +56,11 @@ class DemoPreset:
 
 
 PRESETS = {
-    "default": DemoPreset(image_size=256, frame_spacing=1.5, val_spacing=2.0, scan_spacing=3.0, lidar_beams=32,
-                          lidar_azimuth_steps=900, lidar_range=30.0, lidar_noise=0.01, splat_spacing=0.1,
+    "default": DemoPreset(image_size=256, frame_spacing=1.5, val_spacing=2.0, scan_spacing=3.5, lidar_beams=32,
+                          lidar_azimuth_steps=720, lidar_range=30.0, lidar_noise=0.01, splat_spacing=0.1,
                           splat_range=18.0, colmap_voxel=0.3),
     "tiny": DemoPreset(image_size=64, frame_spacing=6.0, val_spacing=8.0, scan_spacing=6.0, lidar_beams=16,
-                       lidar_azimuth_steps=360, lidar_range=20.0, lidar_noise=0.01, splat_spacing=0.3,
+                       lidar_azimuth_steps=360, lidar_range=20.0, lidar_noise=0.01, splat_spacing=0.35,
                        splat_range=12.0, colmap_voxel=0.5),
 }
 
@@ -152,7 +152,7 @@ def _build(root: Path, seed: int, preset_name: str, key: str, timings: dict) -> 
     T_scene[:, :3, 3] = T_nav[:, :3, 3] @ S.T
     _write_images(root, names, rgb, depth, mask)
     lap("write_images")
-    _write_colmap(root, names, T_scene, K, p, xyz @ S.T, col)
+    _write_colmap(root, names, split, T_scene, K, p, xyz @ S.T, col)
     for s in ("train", "val"):
         atomic_write_text(root / "nvs_split" / f"{s}.txt", "".join(n + "\n" for n, sp_ in zip(names, split) if sp_ == s))
     _write_transforms(root, names, split, T_scene, K, p.image_size)
@@ -207,9 +207,11 @@ def _write_images(root: Path, names, rgb, depth, mask) -> None:
         _save_png(root / "depth" / n, dmm[i])
 
 
-def _write_colmap(root: Path, names, T_scene, K, p: DemoPreset, xyz_scene, col) -> None:
+def _write_colmap(root: Path, names, split, T_scene, K, p: DemoPreset, xyz_scene, col) -> None:
+    """`sparse/0/{cameras,images,points3D}.bin` with the training views, and the extrapolation
+    (val) views in `sparse/0/images_val.bin`, as the real v1 release keeps them."""
     from wanderland_nav.scene.colmap import ColmapCamera, ColmapImage, ColmapModel, ColmapPoints3D, rotmat_to_qvec, \
-        write_model
+        write_images_bin, write_model
 
     cam = ColmapCamera(1, "PINHOLE", p.image_size, p.image_size, np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]))
     images = {}
@@ -225,7 +227,10 @@ def _write_colmap(root: Path, names, T_scene, K, p: DemoPreset, xyz_scene, col) 
     m = len(first)
     pts = ColmapPoints3D(np.arange(1, m + 1, dtype=np.int64), xyz_scene[first].astype(np.float64), col[first],
                          np.zeros(m), np.zeros(m + 1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32))
-    write_model(root / "sparse" / "0", ColmapModel({1: cam}, images, pts), ext=".bin")
+    train = {k: im for k, im in images.items() if split[k - 1] == "train"}
+    val = {k: im for k, im in images.items() if split[k - 1] == "val"}
+    write_model(root / "sparse" / "0", ColmapModel({1: cam}, train, pts), ext=".bin")
+    write_images_bin(root / "sparse" / "0" / "images_val.bin", val)
 
 
 def _write_transforms(root: Path, names, split, T_scene, K, size: int) -> None:
