@@ -1,0 +1,79 @@
+"""Geodesic distance fields to fixed goals, for per-step reward and success checks in the env.
+
+`distance_field(goals[G,3])` precomputes, per goal, the exact distance from every corner of the
+visibility graph to the goal (`corner_to_goal[G,M]`) and the goal's own visibility polygon. A
+lookup for B agents is then exact and cheap:
+    d(p, g) = |p g| if p sees g, else min over corners a that p sees of |p a| + corner_to_goal[g, a],
+with "p sees a" answered by a's precomputed visibility polygon (one binary search). On islands
+with several overlapping levels the same formula runs with triangle walks instead (slower).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from planners.path import _located, _visible_to_nodes
+from planners.visibility import VisPolys, visible
+
+
+class GeodesicField:
+    """Distances to G goals; `lookup(points[B,3], goal_index[B]) -> [B]` (float32, inf if apart)."""
+
+    def __init__(self, nm, goal_xy, goal_tri, goal_island, corner_to_goal, goal_vis: VisPolys):
+        self.nm = nm
+        self.goal_xy = goal_xy  # [G,2] local nav frame
+        self.goal_tri = goal_tri  # [G]
+        self.goal_island = goal_island  # [G]
+        self.corner_to_goal = corner_to_goal  # [G,M] float64
+        self.goal_vis = goal_vis
+
+    @classmethod
+    def build(cls, nm, goals, max_distance: float | None = None) -> "GeodesicField":
+        g = torch.as_tensor(goals, dtype=torch.float64).reshape(-1, 3)
+        tri, xy, _ = _located(nm, g, "distance_field goals", max_distance)
+        t = nm._t
+        isl = t["tri_island"][tri]
+        Bv = _visible_to_nodes(nm, xy, tri, isl)  # [G,M] |goal - b| where b sees the goal
+        D = t["D"]
+        if D.shape[0]:
+            via = (D[None, :, :] + Bv[:, None, :]).min(-1).values  # [G,M]
+            c2g = torch.minimum(Bv, via)
+        else:
+            c2g = Bv
+        vis = VisPolys(xy, isl, nm.walls)
+        return cls(nm, xy, tri, isl, c2g, vis)
+
+    def __len__(self) -> int:
+        return self.goal_xy.shape[0]
+
+    def lookup(self, points, goal_index) -> torch.Tensor:
+        """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B]."""
+        nm = self.nm
+        t = nm._t
+        p = torch.as_tensor(points)
+        out_dtype = p.dtype if p.is_floating_point() else torch.float32
+        gi = torch.as_tensor(goal_index, dtype=torch.long).reshape(-1)
+        loc = nm.to_local(p.reshape(-1, 3).double())
+        B = loc.shape[0]
+        if gi.shape[0] != B:
+            raise ValueError(f"GeodesicField.lookup: {B} points but {gi.shape[0]} goal indices")
+        tri = nm._locate_local(loc, max(0.5, nm.settings.agent_max_climb))
+        miss = tri < 0
+        if miss.any():  # agents slightly off the mesh (e.g. on a simplified-away sliver): snap
+            tri[miss] = nm._snap_local(loc[miss], None)[0]
+        xy = loc[:, :2]
+        isl = t["tri_island"][tri]
+        same = isl == self.goal_island[gi]
+        gxy = self.goal_xy[gi]
+        direct = visible(t["tri_xy"], t["nbr"], nm.walls, isl, self.goal_tri[gi], gxy, xy, self.goal_vis, gi)
+        d_direct = torch.where(direct, (xy - gxy).norm(dim=1), torch.full((B,), float("inf"), dtype=torch.float64))
+        M = t["node_xy"].shape[0]
+        if M:
+            A = _visible_to_nodes(nm, xy, tri, isl)  # [B,M]
+            d_via = (A + self.corner_to_goal[gi]).min(1).values
+            d = torch.minimum(d_direct, d_via)
+        else:
+            d = d_direct
+        d = torch.where(same, d, torch.full_like(d, float("inf")))
+        return d.to(out_dtype).reshape(p.shape[:-1])
+
