@@ -46,8 +46,7 @@ class DemoPreset:
     frame_spacing: float  # metres between stereo frames on the training loops
     val_spacing: float  # metres between stereo frames on the extrapolation path
     scan_spacing: float  # metres between LiDAR scans along every path
-    lidar_beams: int
-    lidar_azimuth_steps: int
+    lidar_rays: int  # beams per scan
     lidar_range: float  # metres
     lidar_noise: float  # metres, range noise sigma
     splat_spacing: float  # metres between Gaussian centres on a surface
@@ -56,12 +55,10 @@ class DemoPreset:
 
 
 PRESETS = {
-    "default": DemoPreset(image_size=256, frame_spacing=1.5, val_spacing=2.0, scan_spacing=3.5, lidar_beams=32,
-                          lidar_azimuth_steps=720, lidar_range=30.0, lidar_noise=0.01, splat_spacing=0.1,
-                          splat_range=18.0, colmap_voxel=0.3),
-    "tiny": DemoPreset(image_size=64, frame_spacing=6.0, val_spacing=8.0, scan_spacing=6.0, lidar_beams=16,
-                       lidar_azimuth_steps=360, lidar_range=20.0, lidar_noise=0.01, splat_spacing=0.35,
-                       splat_range=12.0, colmap_voxel=0.5),
+    "default": DemoPreset(image_size=256, frame_spacing=1.5, val_spacing=2.0, scan_spacing=0.4, lidar_rays=2500,
+                          lidar_range=30.0, lidar_noise=0.01, splat_spacing=0.12, splat_range=16.0, colmap_voxel=0.3),
+    "tiny": DemoPreset(image_size=64, frame_spacing=6.0, val_spacing=8.0, scan_spacing=1.0, lidar_rays=800,
+                       lidar_range=20.0, lidar_noise=0.01, splat_spacing=0.35, splat_range=12.0, colmap_voxel=0.5),
 }
 
 
@@ -141,7 +138,7 @@ def _build(root: Path, seed: int, preset_name: str, key: str, timings: dict) -> 
     lap("images")
     scans = [capture.sample_path(path, p.scan_spacing)[0] for path in capture.PATHS]
     sensors = np.concatenate(scans) + np.array([0.0, 0.0, lidar.SENSOR_ABOVE_RIG])
-    pattern = lidar.ScanPattern(beams=p.lidar_beams, azimuth_steps=p.lidar_azimuth_steps)
+    pattern = lidar.ScanPattern(rays=p.lidar_rays)
     xyz, col, _exact, seen_lidar = lidar.scan(caster, layout, sensors, pattern, p.lidar_range, p.lidar_noise, seed)
     lap("lidar")
     sp = splats.make_splats(layout, np.union1d(seen_img, seen_lidar), rig.position, p.splat_spacing, p.splat_range, seed)

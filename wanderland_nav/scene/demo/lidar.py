@@ -1,7 +1,7 @@
 """A LiDAR-like metric point cloud, cast from the capture rig along the trajectory.
 
-A spinning multi-beam scanner (vertical field of view -40..+25 deg, as a rig LiDAR tilted to
-see the ground near the walker) is fired from rig poses spaced along every path. Its returns are
+A scanner with a -40..+25 deg vertical field of view (a rig LiDAR tilted to see the ground near
+the walker) is fired from rig poses spaced densely along every path. Its returns are
 exact first hits on the ground-truth mesh, so surfaces the rig never sees (roofs, the far side
 of the facades, the inside of the planters) are absent exactly as in a real capture; returns
 beyond `max_range` are dropped, and each range gets N(0, sigma) noise along its beam. Points are
@@ -23,17 +23,22 @@ SENSOR_ABOVE_RIG = 0.25  # the LiDAR sits on top of the camera rig
 
 @dataclass(frozen=True)
 class ScanPattern:
-    beams: int = 48
-    azimuth_steps: int = 720
+    """A non-repetitive scan (Livox-like, as on hand-held mapping rigs): every scan fires `rays`
+    beams at random directions, area-uniform over the elevation band. Scans are taken densely
+    along the walk (every few decimetres), so the accumulated cloud covers the ground evenly
+    instead of showing the concentric rings a few fixed spinning scans would leave."""
+
+    rays: int = 3000
     elev_min_deg: float = -40.0
     elev_max_deg: float = 25.0
 
-    def directions(self, phase: float = 0.0) -> np.ndarray:
-        """Unit beam directions `[beams * azimuth_steps, 3]` in a z-up sensor frame."""
-        el = np.deg2rad(np.linspace(self.elev_min_deg, self.elev_max_deg, self.beams))
-        az = (np.arange(self.azimuth_steps) + phase) * (2 * np.pi / self.azimuth_steps)
-        E, A = np.meshgrid(el, az, indexing="ij")
-        return np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
+    def directions(self, rng: np.random.Generator) -> np.ndarray:
+        """Unit beam directions `[rays, 3]` in a z-up sensor frame."""
+        lo, hi = np.sin(np.deg2rad(self.elev_min_deg)), np.sin(np.deg2rad(self.elev_max_deg))
+        sz = rng.uniform(lo, hi, self.rays)
+        az = rng.uniform(0.0, 2 * np.pi, self.rays)
+        c = np.sqrt(1.0 - sz * sz)
+        return np.stack([c * np.cos(az), c * np.sin(az), sz], -1)
 
 
 def scan(caster: RayCaster, layout: Layout, sensor_positions: np.ndarray, pattern: ScanPattern, max_range: float,
@@ -45,9 +50,8 @@ def scan(caster: RayCaster, layout: Layout, sensor_positions: np.ndarray, patter
     """
     rng = np.random.default_rng(np.random.SeedSequence([seed, 5151]))
     S = sensor_positions.shape[0]
-    phases = rng.uniform(0.0, 1.0, S)  # each scan starts at a different sub-step azimuth
-    dirs = np.concatenate([pattern.directions(ph) for ph in phases])  # [S*R, 3]
-    R = pattern.beams * pattern.azimuth_steps
+    dirs = np.concatenate([pattern.directions(rng) for _ in range(S)])  # [S*R, 3]
+    R = pattern.rays
     orig = np.repeat(sensor_positions, R, axis=0)
     t, tri = caster.cast(orig, dirs)
     keep = np.flatnonzero((tri >= 0) & (t <= max_range))
