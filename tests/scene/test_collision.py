@@ -15,7 +15,7 @@ def _world(seed=0):
     """Nav-frame (z up) cloud: a 20x20 m floor at z=0, a 2 m cube on it, a far wall, a high ceiling,
     and a few isolated noise points. Trajectory: a line 1.5 m above the floor."""
     rng = np.random.default_rng(seed)
-    g = np.arange(-10, 10, 0.04)
+    g = np.arange(-10, 10, 0.06)
     fx, fy = np.meshgrid(g, g, indexing="ij")
     floor = np.stack([fx.ravel(), fy.ravel(), rng.normal(0, 0.01, fx.size)], -1)
     s = np.arange(0, 2, 0.04)

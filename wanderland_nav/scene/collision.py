@@ -18,9 +18,10 @@ Why each step:
 
 The work happens in the nav frame (z up, `geometry.nav_from_scene_rotation`) so crops and bands are
 along gravity for any up axis; the returned mesh is rotated back to the **scene frame**, in metres.
-Memory is bounded: points are processed in chunks, occupancy is stored per voxel (uint8 grid sized
-by the cropped region, not by N), and marching cubes runs over x-slabs whose border vertices are
-merged exactly (they are computed from the same samples).
+Memory is bounded: points are voxelised in chunks (the rotated cloud is never held whole), the crop
+is decided per occupied voxel centre (one KD query per voxel, not per point: the crop boundary is
+exact to half a voxel), the dense bool grid is sized by the cropped region, not by N, and marching
+cubes runs over x-slabs whose border vertices are merged exactly (same samples, same arithmetic).
 """
 
 from __future__ import annotations
@@ -92,26 +93,6 @@ def crop_to_trajectory(points_nav: np.ndarray, centers_nav: np.ndarray, crop_rad
     return keep
 
 
-def _occupied_voxels(points_nav: np.ndarray, origin: np.ndarray, voxel: float, dims: np.ndarray,
-                     min_points: int, chunk: int) -> np.ndarray:
-    """Linear indices (int64, sorted, unique) of voxels holding >= `min_points` points."""
-    keys_all, counts_all = [], []
-    for s in range(0, points_nav.shape[0], chunk):
-        ijk = np.floor((points_nav[s:s + chunk] - origin) / voxel).astype(np.int64)
-        np.clip(ijk, 0, dims - 1, out=ijk)
-        keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-        u, c = np.unique(keys, return_counts=True)
-        keys_all.append(u)
-        counts_all.append(c)
-    if not keys_all:
-        return np.zeros(0, np.int64)
-    keys = np.concatenate(keys_all)
-    counts = np.concatenate(counts_all)
-    u, inv = np.unique(keys, return_inverse=True)
-    tot = np.bincount(inv, weights=counts).astype(np.int64)
-    return u[tot >= min_points]
-
-
 def _marching_cubes_slabs(grid: np.ndarray, slab: int) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes over x-slabs sharing one sample plane; returns merged `(verts [V,3], faces [F,3])`
     in grid index coordinates. Slab borders produce bit-identical vertices, merged by exact match."""
@@ -181,50 +162,78 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     t0 = time.perf_counter()
     timings = {}
 
-    # 1. rotate to nav frame (chunked, float32) and crop
-    nav = np.empty(pts.shape, dtype=np.float32)
+    # 1. voxelise every finite point in the nav frame, chunk by chunk (the rotated cloud is never
+    #    held whole): pass A finds the bounds, pass B the occupied voxel keys and their counts.
+    vox = float(cfg.voxel_size)
+    Rn = nav_from_scene_rotation(up)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    n_bad = 0
     for s in range(0, pts.shape[0], cfg.chunk_points):
-        nav[s:s + cfg.chunk_points] = pts[s:s + cfg.chunk_points].astype(np.float32) @ R.T
-    finite = np.isfinite(nav).all(-1)
-    if not finite.all():
-        log.warning("dropping %d non-finite points", int((~finite).sum()))
-    cams_nav = cams @ nav_from_scene_rotation(up).T
-    keep = crop_to_trajectory(nav, cams_nav, cfg.crop_radius, cfg.height_band, cfg.chunk_points) & finite
-    nav = nav[keep]
-    timings["crop_s"] = time.perf_counter() - t0
-    meta = {"settings": cfg.as_dict(), "up_axis": up, "points_in": int(pts.shape[0]), "points_kept": int(nav.shape[0])}
-    if nav.shape[0] == 0:
+        c = pts[s:s + cfg.chunk_points].astype(np.float32) @ R.T
+        ok = np.isfinite(c).all(-1)
+        n_bad += int((~ok).sum())
+        if ok.any():
+            lo = np.minimum(lo, c[ok].min(0))
+            hi = np.maximum(hi, c[ok].max(0))
+    if n_bad:
+        log.warning("dropping %d non-finite points", n_bad)
+    if not np.isfinite(lo).all():
+        raise ValueError(f"no finite points among {pts.shape[0]}")
+    gdims = np.floor((hi - lo) / vox).astype(np.int64) + 1  # global key space (never allocated densely)
+    if float(np.prod(gdims.astype(np.float64))) > 2.0**62:
+        raise ValueError(f"point cloud extent {(hi - lo).tolist()} m is too large for voxel_size {vox}")
+    keys_l, counts_l = [], []
+    for s in range(0, pts.shape[0], cfg.chunk_points):
+        c = pts[s:s + cfg.chunk_points].astype(np.float32) @ R.T
+        c = c[np.isfinite(c).all(-1)]
+        ijk = np.clip(np.floor((c - lo) / vox).astype(np.int64), 0, gdims - 1)
+        u, cnt = np.unique((ijk[:, 0] * gdims[1] + ijk[:, 1]) * gdims[2] + ijk[:, 2], return_counts=True)
+        keys_l.append(u)
+        counts_l.append(cnt)
+    keys, inv = np.unique(np.concatenate(keys_l), return_inverse=True)
+    counts = np.bincount(inv.reshape(-1), weights=np.concatenate(counts_l)).astype(np.int64)
+    dense_enough = counts >= cfg.min_points_per_voxel
+    keys, counts = keys[dense_enough], counts[dense_enough]
+    ijk = np.stack([keys // (gdims[1] * gdims[2]), (keys // gdims[2]) % gdims[1], keys % gdims[2]], -1)
+    timings["voxelize_s"] = time.perf_counter() - t0
+
+    # 2. crop at voxel resolution: one KD query per occupied voxel instead of per point
+    t1 = time.perf_counter()
+    centres = (lo + (ijk + 0.5) * vox).astype(np.float32)
+    keep = crop_to_trajectory(centres, cams @ Rn.T, cfg.crop_radius, cfg.height_band, cfg.chunk_points)
+    ijk = ijk[keep]
+    meta = {"settings": cfg.as_dict(), "up_axis": up, "points_in": int(pts.shape[0]),
+            "points_kept": int(counts[keep].sum())}
+    timings["crop_s"] = time.perf_counter() - t1
+    if ijk.shape[0] == 0:
         raise ValueError(f"no points left after cropping {pts.shape[0]} points to radius {cfg.crop_radius} m and "
                          f"height band {cfg.height_band} around {cams.shape[0]} capture positions "
                          f"(wrong up axis '{up}'?)")
 
-    # 2. voxel occupancy (grid padded by 1 + closing margin so surfaces close at the border)
-    t1 = time.perf_counter()
+    # dense occupancy over the cropped voxels' box, padded so surfaces close at the border
+    t2 = time.perf_counter()
     pad = 1 + cfg.close_iterations
-    vox = float(cfg.voxel_size)
-    lo = nav.min(0).astype(np.float64)
-    dims_core = np.floor((nav.max(0) - lo) / vox).astype(np.int64) + 1
-    origin = lo - pad * vox  # nav-frame position of the corner of voxel (0,0,0)
-    dims = dims_core + 2 * pad
+    imin = ijk.min(0)
+    dims = ijk.max(0) - imin + 1 + 2 * pad
+    origin = lo + (imin - pad) * vox  # nav-frame corner of local voxel (0,0,0)
     n_vox = int(np.prod(dims))
     if n_vox > 2_000_000_000:
         raise ValueError(f"occupancy grid {dims.tolist()} too large: increase voxel_size or reduce crop_radius")
-    occ_keys = _occupied_voxels(nav, origin, vox, dims, cfg.min_points_per_voxel, cfg.chunk_points)
-    del nav
-    grid = np.zeros(n_vox, dtype=bool)
-    grid[occ_keys] = True
-    grid = grid.reshape(tuple(dims))
+    grid = np.zeros(tuple(dims), dtype=bool)
+    loc = ijk - imin + pad
+    grid[loc[:, 0], loc[:, 1], loc[:, 2]] = True
     if cfg.close_iterations > 0:
         grid = ndi.binary_closing(grid, iterations=cfg.close_iterations)
-    timings["voxelize_s"] = time.perf_counter() - t1
+    timings["grid_s"] = time.perf_counter() - t2
 
     # 3. marching cubes, slab by slab
-    t2 = time.perf_counter()
+    t3 = time.perf_counter()
     verts_idx, faces = _marching_cubes_slabs(grid, cfg.slab_voxels)
     meta["grid_shape"] = [int(d) for d in dims]
     meta["occupied_voxels"] = int(grid.sum())
     del grid
-    timings["marching_cubes_s"] = time.perf_counter() - t2
+    timings["marching_cubes_s"] = time.perf_counter() - t3
 
     # 4. small components
     t3 = time.perf_counter()
@@ -235,7 +244,7 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
 
     # voxel (i,j,k) centre sits at origin + (ijk + 0.5) * vox; marching cubes works on centres
     verts_nav = origin + (verts_idx + 0.5) * vox
-    verts_scene = verts_nav @ nav_from_scene_rotation(up)  # row form of R^T p (R orthonormal)
+    verts_scene = verts_nav @ Rn  # row form of R^T p (R orthonormal)
     timings["total_s"] = time.perf_counter() - t0
     meta["timings"] = timings
     mesh = trimesh.Trimesh(vertices=verts_scene, faces=faces, process=False)
