@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 
 from planners.path import _located, _visible_to_nodes
-from planners.visibility import VisPolys, visible
+from planners.visibility import VisPolys, tangent_ok, visible
 
 
 class GeodesicField:
@@ -47,33 +47,67 @@ class GeodesicField:
         return self.goal_xy.shape[0]
 
     def lookup(self, points, goal_index) -> torch.Tensor:
-        """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B]."""
+        """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B].
+
+        Output dtype follows `points` (float32 for non-float input); inf where the point is on
+        another island than its goal."""
         nm = self.nm
-        t = nm._t
         p = torch.as_tensor(points)
         out_dtype = p.dtype if p.is_floating_point() else torch.float32
         gi = torch.as_tensor(goal_index, dtype=torch.long).reshape(-1)
         loc = nm.to_local(p.reshape(-1, 3).double())
+        if gi.shape[0] != loc.shape[0]:
+            raise ValueError(f"GeodesicField.lookup: {loc.shape[0]} points but {gi.shape[0]} goal indices")
+        if self._all_simple:
+            d = self._lookup_simple(loc, gi)
+        else:
+            d = self._lookup_general(loc, gi)
+        return d.to(out_dtype).reshape(p.shape[:-1])
+
+    @property
+    def _all_simple(self) -> bool:
+        if not hasattr(self, "_simple_cache"):
+            self._simple_cache = bool(self.nm.walls.simple.all()) and bool(self.nm.vispolys.ok.all())
+        return self._simple_cache
+
+    def _lookup_simple(self, loc, gi):
+        """Fast path (every island one 2D polygon): ~50 tensor ops for any B, no Python loops."""
+        nm = self.nm
+        t = nm._t
+        xy = loc[:, :2]
+        isl = nm._island_by_column(loc)
+        gxy = self.goal_xy[gi]
+        d = torch.where(self.goal_vis.sees(gi, xy), (xy - gxy).norm(dim=1), torch.inf)
+        M = t["node_xy"].shape[0]
+        if M:
+            # only corners a path can bend around (tangent) and that lead to the goal are tested
+            c2g = self.corner_to_goal[gi]  # [B,M]
+            cand = torch.isfinite(c2g) & tangent_ok(xy[:, None, :], t["node_xy"], t["node_prev"], t["node_next"],
+                                                    t["node_tangent"])
+            bi, mi = torch.nonzero(cand, as_tuple=True)
+            seen = nm.vispolys.sees(mi, xy[bi])
+            bi, mi = bi[seen], mi[seen]
+            val = (xy[bi] - t["node_xy"][mi]).norm(dim=1) + c2g[bi, mi]
+            via = torch.full((xy.shape[0],), torch.inf, dtype=torch.float64).scatter_reduce(0, bi, val, "amin")
+            d = torch.minimum(d, via)
+        return torch.where(isl == self.goal_island[gi], d, torch.inf)
+
+    def _lookup_general(self, loc, gi):
+        """Any navmesh (islands with overlapping levels walk the triangles)."""
+        nm = self.nm
+        t = nm._t
         B = loc.shape[0]
-        if gi.shape[0] != B:
-            raise ValueError(f"GeodesicField.lookup: {B} points but {gi.shape[0]} goal indices")
         tri = nm._locate_local(loc, max(0.5, nm.settings.agent_max_climb))
         miss = tri < 0
         if miss.any():  # agents slightly off the mesh (e.g. on a simplified-away sliver): snap
             tri[miss] = nm._snap_local(loc[miss], None)[0]
         xy = loc[:, :2]
         isl = t["tri_island"][tri]
-        same = isl == self.goal_island[gi]
         gxy = self.goal_xy[gi]
-        direct = visible(t["tri_xy"], t["nbr"], nm.walls, isl, self.goal_tri[gi], gxy, xy, self.goal_vis, gi)
-        d_direct = torch.where(direct, (xy - gxy).norm(dim=1), torch.full((B,), float("inf"), dtype=torch.float64))
-        M = t["node_xy"].shape[0]
-        if M:
+        direct = visible(t["tri_xy"], t["nbr"], nm.walls, isl, self.goal_tri[gi], gxy, xy, self.goal_vis, gi,
+                         t["tri_region"][tri], t["tri_region"])
+        d = torch.where(direct, (xy - gxy).norm(dim=1), torch.full((B,), float("inf"), dtype=torch.float64))
+        if t["node_xy"].shape[0]:
             A = _visible_to_nodes(nm, xy, tri, isl)  # [B,M]
-            d_via = (A + self.corner_to_goal[gi]).min(1).values
-            d = torch.minimum(d_direct, d_via)
-        else:
-            d = d_direct
-        d = torch.where(same, d, torch.full_like(d, float("inf")))
-        return d.to(out_dtype).reshape(p.shape[:-1])
-
+            d = torch.minimum(d, (A + self.corner_to_goal[gi]).min(1).values)
+        return torch.where(isl == self.goal_island[gi], d, torch.inf)

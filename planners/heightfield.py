@@ -67,6 +67,7 @@ def _tri_cell_zrange(A, B, C, x0, x1, y0, y1, eps):
     (zmin, zmax) with +inf/-inf where the triangle misses the cell.
     """
     P = A.shape[0]
+    x0, x1, y0, y1 = x0 - eps, x1 + eps, y0 - eps, y1 + eps  # grown (eps > 0) or shrunk (eps < 0) cell
     zmin = np.full(P, np.inf)
     zmax = np.full(P, -np.inf)
 
@@ -75,7 +76,7 @@ def _tri_cell_zrange(A, B, C, x0, x1, y0, y1, eps):
         np.maximum(zmax, np.where(mask, z, -np.inf), out=zmax)
 
     for V in (A, B, C):
-        take((V[:, 0] >= x0 - eps) & (V[:, 0] <= x1 + eps) & (V[:, 1] >= y0 - eps) & (V[:, 1] <= y1 + eps), V[:, 2])
+        take((V[:, 0] >= x0) & (V[:, 0] <= x1) & (V[:, 1] >= y0) & (V[:, 1] <= y1), V[:, 2])
     with np.errstate(divide="ignore", invalid="ignore"):
         for P0, P1 in ((A, B), (B, C), (C, A)):
             d = P1 - P0
@@ -85,7 +86,7 @@ def _tri_cell_zrange(A, B, C, x0, x1, y0, y1, eps):
                 for v in (lo, hi):
                     t = (v - P0[:, axis]) / d[:, axis]
                     o = P0[:, other] + t * d[:, other]
-                    ok = (np.abs(d[:, axis]) > 1e-12) & (t >= 0) & (t <= 1) & (o >= olo - eps) & (o <= ohi + eps)
+                    ok = (np.abs(d[:, axis]) > 1e-12) & (t >= 0) & (t <= 1) & (o >= olo) & (o <= ohi)
                     take(ok, P0[:, 2] + t * d[:, 2])
         n = np.cross(B - A, C - A)
         flat_ok = np.abs(n[:, 2]) > 1e-12
@@ -119,6 +120,7 @@ def rasterize(verts: np.ndarray, faces: np.ndarray, s: NavMeshSettings, *, chunk
     keep = nlen > 1e-12
     tri, n, nlen = tri[keep], n[keep], nlen[keep]
     walk_tri = n[:, 2] / nlen > np.cos(np.deg2rad(s.agent_max_slope))
+    vertical = np.abs(n[:, 2]) / nlen < 1e-6
 
     lo = np.floor((tri[:, :, :2].min(axis=1) - bmin[:2]) / cs).astype(np.int64)
     hi = np.floor((tri[:, :, :2].max(axis=1) - bmin[:2]) / cs).astype(np.int64)
@@ -142,7 +144,10 @@ def rasterize(verts: np.ndarray, faces: np.ndarray, s: NavMeshSettings, *, chunk
         cy = lo[t, 1] + k // nx[t]
         x0 = bmin[0] + cx * cs
         y0 = bmin[1] + cy * cs
-        zmin, zmax = _tri_cell_zrange(tri[t, 0], tri[t, 1], tri[t, 2], x0, x0 + cs, y0, y0 + cs, 1e-6 * cs)
+        # Recast keeps a clipped polygon only with >= 3 vertices: a triangle that merely touches a
+        # cell's border adds nothing (shrink the cell), a vertical wall on a border adds to both sides.
+        eps = np.where(vertical[t], 1e-6 * cs, -1e-6 * cs)
+        zmin, zmax = _tri_cell_zrange(tri[t, 0], tri[t, 1], tri[t, 2], x0, x0 + cs, y0, y0 + cs, eps)
         hit = np.isfinite(zmin)
         smin = np.floor((zmin[hit] - bmin[2]) / ch).astype(np.int64)
         smax = np.ceil((zmax[hit] - bmin[2]) / ch).astype(np.int64)

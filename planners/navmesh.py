@@ -101,7 +101,7 @@ class NavMesh:
         tri_island = tm.region_island[tm.tri_region] if len(tm.tris) else np.zeros(0, np.int64)
         node_island = tri_island[node_tri] if len(node_tri) else np.zeros(0, np.int64)
         walls = Walls(tri_xy_t, nbr_t, torch.from_numpy(tri_island), torch.from_numpy(island_is_simple(tm.region_island)))
-        D, P, vp = build_graph(tri_xy_t, nbr_t, walls, node_xy, node_tri, node_island, tm.node_prev * cs, tm.node_next * cs,
+        D, P, vp = build_graph(tri_xy_t, nbr_t, torch.from_numpy(tm.tri_region), walls, node_xy, node_tri, node_island, tm.node_prev * cs, tm.node_next * cs,
                            tm.node_tangent)
         return cls(settings, cf.width, cf.height, source_hash=mesh_hash(V, F), bmin=cf.bmin, span_col=cf.col,
                    span_floor=cf.floor, span_region=tm.span_region, verts_xy=verts_xy, verts_z=verts_z, tris=tm.tris,
@@ -187,6 +187,7 @@ class NavMesh:
             "col_start": t(self.col_start),
             "span_floor": t(self.span_floor.astype(np.int64)),
             "span_region": t(self.span_region.astype(np.int64)),
+            "span_island": t(self.region_island[self.span_region].astype(np.int64)) if N else torch.zeros(0, dtype=torch.long),
             "col_tris": t(self.col_tris.astype(np.int64)),
             "rc_sorted": t(self.rc_sorted.astype(np.int64)),
             "rc_order": t(self.rc_order.astype(np.int64)),
@@ -319,6 +320,23 @@ class NavMesh:
         best = dz.argmin(1)
         found = dz.gather(1, best[:, None])[:, 0] <= vertical_tolerance
         return torch.where(found, candc.gather(1, best[:, None])[:, 0], out)
+
+    def _island_by_column(self, p: torch.Tensor) -> torch.Tensor:
+        """Island `[B]` of local points from the raster: the span in their column nearest in height
+        (-1 outside every span column). Cheaper than triangle location; used by field lookups."""
+        t = self._t
+        ix = torch.floor(p[:, 0] / self.cs).long()
+        iy = torch.floor(p[:, 1] / self.cs).long()
+        ing = (ix >= 0) & (iy >= 0) & (ix < self.width) & (iy < self.height)
+        col = torch.where(ing, ix + iy * self.width, 0)
+        st = t["col_start"][col]
+        cnt = torch.where(ing, t["col_start"][col + 1] - st, 0)
+        k = torch.arange(max(self.max_col_spans, 1))
+        valid = k[None] < cnt[:, None]
+        sidx = torch.where(valid, st[:, None] + k[None], 0)
+        dz = torch.where(valid, (p[:, 2:3] - t["span_floor"][sidx] * self.ch).abs(), torch.inf)
+        span = sidx.gather(1, dz.argmin(1, keepdim=True))[:, 0]
+        return torch.where(valid.any(1), t["span_island"][span], -1)
 
     def _snap_local(self, p: torch.Tensor, max_distance: float | None, chunk: int = 2048):
         """(tri[B], xy[B,2], z[B], distance[B]) of the nearest navmesh point to local p[B,3].

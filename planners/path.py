@@ -42,7 +42,7 @@ def _visible_to_nodes(nm, xy: torch.Tensor, tri: torch.Tensor, isl: torch.Tensor
     if len(qi):
         # from the corner to the point: the corner's visibility polygon answers it in one lookup
         vis = visible(t["tri_xy"], t["nbr"], nm.walls, isl[qi], t["node_tri"][mi], t["node_xy"][mi], xy[qi],
-                      nm.vispolys, mi)
+                      nm.vispolys, mi, t["tri_region"][tri[qi]], t["tri_region"])
         qi, mi = qi[vis], mi[vis]
         out[qi, mi] = (xy[qi] - t["node_xy"][mi]).norm(dim=1)
     return out
@@ -72,7 +72,8 @@ def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 2
     idx = torch.nonzero(same)[:, 0]
     if len(idx) == 0:
         return (dist, a_out, b_out) if with_nodes else dist
-    seen = visible(t["tri_xy"], t["nbr"], nm.walls, isl_s[idx], s_tri[idx], s_xy[idx], g_xy[idx])
+    seen = visible(t["tri_xy"], t["nbr"], nm.walls, isl_s[idx], s_tri[idx], s_xy[idx], g_xy[idx],
+                   q_region=t["tri_region"][g_tri[idx]], tri_region=t["tri_region"])
     direct = idx[seen]
     dist[direct] = (s_xy[direct] - g_xy[direct]).norm(dim=1)
     rest = idx[~seen]

@@ -53,41 +53,79 @@ class TriMesh:
 # --------------------------------------------------------------------------- regions
 
 
+def _unlinked_neighbours(cf: CompactField) -> np.ndarray:
+    """Per span: does a 2D-adjacent column hold a span of the same island that it is not linked to
+    (a ledge between levels)? Such spans cannot share one plain 2D polygon without a wall between."""
+    N = len(cf.col)
+    start = np.searchsorted(cf.col, np.arange(cf.width * cf.height + 1))
+    cnt = np.diff(start)
+    ix, iy = cf.ix, cf.iy
+    bad = np.zeros(N, bool)
+    K = int(cnt.max()) if N else 0
+    for d in range(4):
+        nx_, ny_ = ix + DIRS[d, 0], iy + DIRS[d, 1]
+        inside = (nx_ >= 0) & (ny_ >= 0) & (nx_ < cf.width) & (ny_ < cf.height)
+        nc = np.where(inside, nx_ + ny_ * cf.width, 0)
+        for k in range(K):
+            has = inside & (k < cnt[nc])
+            j = np.where(has, start[nc] + k, 0)
+            bad |= has & (cf.island[j] == cf.island) & (cf.link[:, d] != j)
+    return bad
+
+
 def split_regions(cf: CompactField) -> np.ndarray:
-    """Region id per span: islands, split by BFS wherever an island covers a column twice."""
+    """Region id per span such that each region is a plain 2D polygon: no column twice, and any
+    two 2D-adjacent spans of a region are linked. Islands that already are keep their id; the
+    others (several levels) are split by a breadth-first flood that refuses spans breaking it."""
     N = len(cf.col)
     if N == 0:
         return np.zeros(0, np.int64)
-    pairs = cf.island * (cf.width * cf.height) + cf.col
-    _, counts = np.unique(pairs, return_counts=True)
+    ncols = cf.width * cf.height
+    pairs = cf.island * ncols + cf.col
+    uniq, counts = np.unique(pairs, return_counts=True)
+    rep = np.isin(pairs, uniq[counts > 1]) | _unlinked_neighbours(cf)
     region = cf.island.copy()
-    if counts.max() == 1:
+    multi = np.unique(cf.island[rep])
+    if len(multi) == 0:
         return region
-    multi = np.unique(cf.island[np.isin(pairs, np.unique(pairs)[counts > 1])])
     next_id = int(cf.island.max()) + 1
     region[np.isin(cf.island, multi)] = -1
     link = cf.link
+    col = cf.col
+    w, h = cf.width, cf.height
+
+    def fits(b, used):
+        x, y = int(col[b]) % w, int(col[b]) // w
+        if int(col[b]) in used:
+            return False
+        for d in range(4):
+            nx_, ny_ = x + int(DIRS[d, 0]), y + int(DIRS[d, 1])
+            if 0 <= nx_ < w and 0 <= ny_ < h:
+                other = used.get(nx_ + ny_ * w)
+                if other is not None and int(link[b, d]) != other:
+                    return False
+        return True
+
     for isl in multi:
-        todo = np.nonzero(cf.island == isl)[0]
         first = True
-        for seed in todo:
+        for seed in np.nonzero(cf.island == isl)[0]:
             if region[seed] >= 0:
                 continue
             rid = int(isl) if first else next_id
             if not first:
                 next_id += 1
             first = False
-            used = {int(cf.col[seed])}
+            used = {int(col[seed]): int(seed)}
             region[seed] = rid
             q = deque([int(seed)])
             while q:
                 a = q.popleft()
                 for b in link[a]:
-                    if b >= 0 and region[b] < 0 and int(cf.col[b]) not in used:
-                        used.add(int(cf.col[b]))
+                    b = int(b)
+                    if b >= 0 and region[b] < 0 and fits(b, used):
+                        used[int(col[b])] = b
                         region[b] = rid
-                        q.append(int(b))
-    # compact ids
+                        q.append(b)
     _, region = np.unique(region, return_inverse=True)
     return region.astype(np.int64)
 
@@ -232,8 +270,10 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
             labs = [_ring_labels(p, r, lookup, cf.link, span_region) for p in dens]
             for use_dp in (True, False):
                 simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
-                cand = shapely.Polygon(simp[0][0], [s[0] for s in simp[1:]])
-                if cand.is_valid and all(len(s[0]) >= 3 for s in simp[:1]):
+                if any(len(s_[0]) < 3 for s_ in simp):
+                    continue  # a ring collapsed under simplification: keep the exact contour
+                cand = shapely.Polygon(simp[0][0], [s_[0] for s_ in simp[1:]])
+                if cand.is_valid:
                     break
             tri_geom = shapely.constrained_delaunay_triangles(cand)
             tri_xy = shapely.get_coordinates(tri_geom.geoms if hasattr(tri_geom, "geoms") else tri_geom)

@@ -178,28 +178,33 @@ class VisPolys:
         return self
 
     def sees(self, src: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-        """Whether points p[R,2] lie in the visibility polygons of sources src[R] (needs self.ok[src])."""
+        """Whether points p[R,2] lie in the visibility polygons of sources src[R] (needs self.ok[src]).
+
+        The fan triangle (source, h0, h1) bracketing p's angle is counter-clockwise, so p is
+        visible iff it lies left of h0 -> h1 (within 1e-9 m)."""
         if p.shape[0] == 0:
             return torch.zeros(0, dtype=torch.bool)
-        o = self.src_xy[src]
-        th = torch.atan2(p[:, 1] - o[:, 1], p[:, 0] - o[:, 0])
-        key = src * 8 + 4.0 + th
-        i1 = torch.searchsorted(self.keys, key).clamp(1, len(self.keys) - 1)
-        h0, h1 = self.hits[i1 - 1], self.hits[i1]
-        ex, ey = h1[:, 0] - h0[:, 0], h1[:, 1] - h0[:, 1]
-        sp_ = ex * (p[:, 1] - h0[:, 1]) - ey * (p[:, 0] - h0[:, 0])
-        so = ex * (o[:, 1] - h0[:, 1]) - ey * (o[:, 0] - h0[:, 0])
-        L = torch.sqrt(ex * ex + ey * ey).clamp_min(1e-30)
-        near = (p - o).norm(dim=1) <= torch.minimum((h0 - o).norm(dim=1), (h1 - o).norm(dim=1))
-        return near | (sp_ * torch.sign(so) / L >= -1e-9)
+        if not hasattr(self, "_hx"):
+            self._hx, self._hy = self.hits[:, 0].contiguous(), self.hits[:, 1].contiguous()
+            self._sx, self._sy = self.src_xy[:, 0].contiguous(), self.src_xy[:, 1].contiguous()
+        px, py = p[:, 0], p[:, 1]
+        th = torch.atan2(py - self._sy[src], px - self._sx[src])
+        i1 = torch.searchsorted(self.keys, src * 8 + 4.0 + th).clamp_(1, len(self.keys) - 1)
+        i0 = i1 - 1
+        x0, y0 = self._hx[i0], self._hy[i0]
+        ex, ey = self._hx[i1] - x0, self._hy[i1] - y0
+        return ex * (py - y0) - ey * (px - x0) >= -1e-9 * (ex.abs() + ey.abs())
 
 
 def visible(tri_xy, nbr, walls: Walls, isl: torch.Tensor, tri0: torch.Tensor, p: torch.Tensor, q: torch.Tensor,
-            vispolys: VisPolys | None = None, src: torch.Tensor | None = None):
+            vispolys: VisPolys | None = None, src: torch.Tensor | None = None,
+            q_region: torch.Tensor | None = None, tri_region: torch.Tensor | None = None):
     """Line of sight `[R]` along the surface for segments p->q starting in triangles tri0 of island isl.
 
     With `vispolys` and `src[R]` (the source whose polygon holds p, i.e. p == its position), single-
-    polygon islands use the polygon lookup; otherwise the wall test; several-level islands walk."""
+    polygon islands use the polygon lookup; otherwise the wall test; several-level islands walk,
+    and there the walk must end in q's region `q_region[R]` (regions of triangles: `tri_region`),
+    so a point on the deck is not "visible" from the ground right below it."""
     R = p.shape[0]
     out = torch.zeros(R, dtype=torch.bool)
     if R == 0:
@@ -207,7 +212,11 @@ def visible(tri_xy, nbr, walls: Walls, isl: torch.Tensor, tri0: torch.Tensor, p:
     simple = walls.simple[isl]
     w = torch.nonzero(~simple)[:, 0]
     if len(w):
-        out[w] = walk(tri_xy, nbr, tri0[w], p[w], q[w]).reached
+        r = walk(tri_xy, nbr, tri0[w], p[w], q[w])
+        ok = r.reached
+        if q_region is not None:
+            ok = ok & (tri_region[r.tri] == q_region[w])
+        out[w] = ok
     if vispolys is not None:
         use = simple & vispolys.ok[src]
         ui = torch.nonzero(use)[:, 0]
@@ -222,7 +231,7 @@ def visible(tri_xy, nbr, walls: Walls, isl: torch.Tensor, tri0: torch.Tensor, p:
     return out
 
 
-def build_graph(tri_xy_t, nbr_t, walls: Walls, node_pos, node_tri, node_island, node_prev, node_next, node_tangent,
+def build_graph(tri_xy_t, nbr_t, tri_region, walls: Walls, node_pos, node_tri, node_island, node_prev, node_next, node_tangent,
                 chunk: int = 200_000):
     """All-pairs shortest distances D[M,M] (float64, inf if apart) and predecessors P[M,M]."""
     M = len(node_pos)
@@ -246,7 +255,8 @@ def build_graph(tri_xy_t, nbr_t, walls: Walls, node_pos, node_tri, node_island, 
     for s in range(0, len(i), chunk):
         a, b = torch.from_numpy(i[s:s + chunk]), torch.from_numpy(j[s:s + chunk])
         isl = torch.from_numpy(node_island)[a]
-        vis[s:s + chunk] = visible(tri_xy_t, nbr_t, walls, isl, ntri[a], pos[a], pos[b], vp, a).numpy()
+        vis[s:s + chunk] = visible(tri_xy_t, nbr_t, walls, isl, ntri[a], pos[a], pos[b], vp, a,
+                                   tri_region[ntri[b]], tri_region).numpy()
     i, j = i[vis], j[vis]
     w = np.linalg.norm(node_pos[i] - node_pos[j], axis=1)
     g = sp.csr_matrix((w, (i, j)), shape=(M, M))
