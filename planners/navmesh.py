@@ -264,6 +264,8 @@ class NavMesh:
     # ------------------------------------------------------------------ point location
 
     def _check_points(self, points, name: str = "points") -> torch.Tensor:
+        if not isinstance(points, torch.Tensor):
+            points = np.asarray(points, dtype=np.float64)
         p = torch.as_tensor(points, dtype=torch.float64)
         if p.shape[-1:] != (3,):
             raise ValueError(f"{name}: expected shape [...,3], got {tuple(p.shape)}")

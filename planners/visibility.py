@@ -119,8 +119,9 @@ class VisPolys:
     is the fan of triangles (source, hit_i, hit_i+1). A point is then tested with one binary
     search on its angle and one side test, instead of a test against every wall: this is what
     makes batched distances and field lookups cheap.
-    Layout: flat arrays sorted by key = source * 8 + angle + pi (angle in [-pi, pi]), each
-    source's fan padded with its last/first entry shifted by -/+ 2 pi so searches never wrap.
+    Layout: flat arrays sorted by key = source * 32 + 16 + angle (angle in [-pi, pi]), each
+    source's fan padded with its last/first entry shifted by -/+ 2 pi so searches never wrap
+    (padded keys stay within [source * 32 + 16 - 3 pi, source * 32 + 16 + 3 pi]).
     """
 
     EPS_ANGLE = 1e-9
@@ -161,7 +162,7 @@ class VisPolys:
                 h = o[:, None] + tmin[..., None] * d  # [s,R,2]
                 th = torch.cat([th[:, -1:] - 2 * torch.pi, th, th[:, :1] + 2 * torch.pi], 1)
                 h = torch.cat([h[:, -1:], h, h[:, :1]], 1)
-                keys.append((ss[:, None] * 8 + 4.0 + th).reshape(-1))
+                keys.append((ss[:, None] * 32 + 16.0 + th).reshape(-1))
                 hits.append(h.reshape(-1, 2))
                 self.ok[ss] = True
         if keys:
@@ -189,7 +190,7 @@ class VisPolys:
             self._sx, self._sy = self.src_xy[:, 0].contiguous(), self.src_xy[:, 1].contiguous()
         px, py = p[:, 0], p[:, 1]
         th = torch.atan2(py - self._sy[src], px - self._sx[src])
-        i1 = torch.searchsorted(self.keys, src * 8 + 4.0 + th).clamp_(1, len(self.keys) - 1)
+        i1 = torch.searchsorted(self.keys, src * 32 + 16.0 + th).clamp_(1, len(self.keys) - 1)
         i0 = i1 - 1
         x0, y0 = self._hx[i0], self._hy[i0]
         ex, ey = self._hx[i1] - x0, self._hy[i1] - y0
