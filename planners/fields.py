@@ -76,6 +76,13 @@ class GeodesicField:
         t = nm._t
         xy = loc[:, :2]
         isl = nm._island_by_column(loc)
+        miss = isl < 0
+        if miss.any():  # on a sliver the contour simplification added beyond the raster: use triangles
+            tri = nm._locate_local(loc[miss], max(0.5, nm.settings.agent_max_climb))
+            bad = tri < 0
+            if bad.any():
+                tri[bad] = nm._snap_local(loc[miss][bad], None)[0]
+            isl[miss] = t["tri_island"][tri]
         gxy = self.goal_xy[gi]
         d = torch.where(self.goal_vis.sees(gi, xy), (xy - gxy).norm(dim=1), torch.inf)
         M = t["node_xy"].shape[0]

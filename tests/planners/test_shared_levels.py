@@ -1,0 +1,87 @@
+"""The three real Recast test levels (+Y up) with Recast's default settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from planners import NavMesh, NavMeshSettings
+
+LEVELS = ("dungeon", "nav_test", "undulating")
+
+
+def _bake(shared_data, name) -> NavMesh:
+    mesh = trimesh.load(shared_data / "meshes" / f"{name}.obj", force="mesh")
+    return NavMesh.bake(mesh, NavMeshSettings())  # Recast defaults, up_axis "+y"
+
+
+@pytest.fixture(scope="module")
+def dungeon(shared_data) -> NavMesh:
+    return _bake(shared_data, "dungeon")
+
+
+def test_dungeon_bake(dungeon):
+    assert dungeon.up_axis == "+y"
+    assert len(dungeon.islands) == 3
+    assert 1400 < dungeon.area < 1750  # walkable XZ area in m^2 (Recast raster + contour simplification)
+    pts = dungeon.random_navigable_points(200, seed=0)
+    assert dungeon.is_navigable(pts).all()
+    # +Y up: the sampled points lie on the floors the level's vertices span
+    assert pts[:, 1].min() >= -0.5 and pts[:, 1].max() <= 40.5
+
+
+def _check_pairs(nm: NavMesh, n: int, seed: int, n_paths: int):
+    pts = nm.random_navigable_points(2 * n, seed=seed)
+    a, b = pts[:n], pts[n:]
+    d = nm.geodesic_distance(a, b).double()
+    d_back = nm.geodesic_distance(b, a).double()
+    fin = torch.isfinite(d)
+    assert torch.equal(fin, torch.isfinite(d_back))
+    assert torch.allclose(d[fin], d_back[fin], atol=1e-4)
+    straight = torch.from_numpy(np.linalg.norm((a - b)[:, [0, 2]], axis=1))
+    assert (d[fin] >= straight[fin] - 1e-6).all()
+    # reachability agrees with islands
+    same = torch.from_numpy(nm.island_of(a) == nm.island_of(b))
+    assert torch.equal(fin, same)
+    for i in range(n_paths):
+        r = nm.find_path(a[i], b[i])
+        assert r.reachable == bool(fin[i])
+        if r.reachable:
+            assert r.length == pytest.approx(float(d[i]), abs=1e-4)
+            t = np.linspace(0, 1, 25)[:, None]
+            for p, q in zip(r.points[:-1], r.points[1:]):
+                seg = p + t * (q - p)
+                # on the surface within the snap tolerance (heights along the segment interpolate)
+                snapped = nm.snap_point(seg, max_distance=2.5)
+                assert np.abs(snapped[:, [0, 2]] - seg[:, [0, 2]]).max() < 1e-3
+    return d
+
+
+def test_dungeon_paths(dungeon):
+    _check_pairs(dungeon, 64, seed=1, n_paths=8)
+
+
+def test_dungeon_field_and_moves(dungeon):
+    goals = dungeon.random_navigable_points(2, seed=3)
+    f = dungeon.distance_field(goals)
+    pts = dungeon.random_navigable_points(64, seed=4)
+    gi = np.arange(64) % 2
+    ref = dungeon.geodesic_distance(pts, goals[gi])
+    got = f.lookup(torch.tensor(pts), torch.tensor(gi))
+    fin = torch.isfinite(ref)
+    assert torch.equal(fin, torch.isfinite(got))
+    assert torch.allclose(got[fin].float(), ref[fin], atol=1e-3)
+    start = torch.tensor(pts)
+    end, _ = dungeon.move_along_surface(start, start + torch.tensor([2.0, 0.0, 1.5], dtype=torch.float64))
+    assert dungeon.is_navigable(end.numpy(), max_height_delta=0.6).all()
+    assert np.array_equal(dungeon.island_of(end.numpy()), dungeon.island_of(pts))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", LEVELS)
+def test_level_many_pairs(shared_data, name):
+    nm = _bake(shared_data, name)
+    assert nm.area > 1000
+    _check_pairs(nm, 400, seed=7, n_paths=40)
