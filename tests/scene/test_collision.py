@@ -29,7 +29,10 @@ def _world(seed=0):
     far = np.stack([np.full(2000, 40.0), rng.uniform(-5, 5, 2000), rng.uniform(0, 3, 2000)], -1)
     ceiling = np.stack([rng.uniform(-5, 5, 5000), rng.uniform(-5, 5, 5000), np.full(5000, 12.0)], -1)
     noise = np.array([[0.0, 0.0, 3.0], [-5.0, 5.0, 2.5]])
-    pts = np.concatenate([floor, cube, far, ceiling, noise]).astype(np.float32)
+    r = np.arange(0, 4, 0.05)
+    ra, rb = np.meshgrid(r, r, indexing="ij")
+    roof = np.stack([ra.ravel() - 8, rb.ravel() - 2, np.full(ra.size, 2.8)], -1)  # a canopy over the path
+    pts = np.concatenate([floor, cube, far, ceiling, noise, roof]).astype(np.float32)
     cams = np.stack([np.linspace(-8, 8, 20), np.zeros(20), np.full(20, 1.5)], -1)
     return pts, cams
 
@@ -41,7 +44,9 @@ def test_known_geometry_nav_up():
     pts, cams = _world()
     m = extract_collision_mesh(pts, cams, "+z", **SET)
     c, n = m.triangles_center, m.face_normals
-    assert m.volume > 0 and m.is_winding_consistent  # outward normals, closed slabs
+    assert m.is_winding_consistent
+    closed = extract_collision_mesh(pts, cams, "+z", settings=CollisionSettings(**SET, drop_tops_above_capture=None))
+    assert closed.is_watertight and closed.volume > 0  # closed slabs with outward normals
     # far wall (40 m away) and ceiling (10.5 m above the cameras) are cropped away
     assert c[:, 0].max() < 13 and c[:, 2].max() < 3
     # floor top surface: upward faces away from the cube sit within a voxel of z=0
@@ -66,7 +71,10 @@ def test_any_up_axis_gives_rotated_same_mesh(up):
     assert len(m.faces) == len(ref.faces)
     back = np.asarray(m.vertices) @ R.T  # to nav frame
     np.testing.assert_allclose(np.sort(back, axis=0), np.sort(np.asarray(ref.vertices), axis=0), atol=1e-4)
-    assert m.volume == pytest.approx(ref.volume, rel=1e-6)
+    assert m.area == pytest.approx(ref.area, rel=1e-9)
+    # same faces, same orientation: normals agree after rotating back
+    nb = np.asarray(m.face_normals) @ R.T
+    np.testing.assert_allclose(np.sort(nb, axis=0), np.sort(np.asarray(ref.face_normals), axis=0), atol=1e-6)
 
 
 def test_slabs_and_chunks_do_not_change_the_mesh():
@@ -83,6 +91,20 @@ def test_min_component_faces_is_configurable():
     keep_all = extract_collision_mesh(pts, cams, "+z", **{**SET, "min_component_faces": 1})
     c = keep_all.triangles_center
     assert (np.linalg.norm(c - [0, 0, 3], axis=1) < 0.5).any()  # the noise blob survives
+
+
+def test_hidden_roof_tops_are_dropped():
+    """The canopy at z=2.8 (cameras at 1.5) keeps its seen underside but loses its top."""
+    pts, cams = _world()
+    under_roof = lambda c: (c[:, 0] > -7.5) & (c[:, 0] < -4.5) & (np.abs(c[:, 1]) < 1.5) & (c[:, 2] > 2.3)
+    m = extract_collision_mesh(pts, cams, "+z", **SET)
+    c, n = m.triangles_center, m.face_normals
+    roof = under_roof(c)
+    assert (roof & (n[:, 2] < -0.9)).sum() > 100  # underside present
+    assert not (roof & (n[:, 2] > 0.5)).any()  # no walkable top
+    assert m.metadata["collision"]["hidden_top_faces_dropped"] > 100
+    keep = extract_collision_mesh(pts, cams, "+z", settings=CollisionSettings(**SET, drop_tops_above_capture=None))
+    assert (under_roof(keep.triangles_center) & (keep.face_normals[:, 2] > 0.9)).sum() > 100
 
 
 def test_drop_small_components_unit():

@@ -13,6 +13,9 @@ Why each step:
 * **marching cubes** (scikit-image) on the occupancy at level 0.5 ("ascent": outward winding, positive
   volume): each occupied layer becomes a
   thin closed slab whose faces sit half a voxel from the scanned surface, normals pointing out.
+* **hidden tops** — upward faces well above the nearest capture position (`drop_tops_above_capture`)
+  are the closing sides of ceiling / roof / canopy slabs that the scanner saw only from below;
+  left in, they become phantom walkable islands on top of the lobby ceiling.
 * **small components** (< `min_component_faces`) are flying noise or isolated returns; they would
   become unreachable navmesh islands or phantom obstacles.
 
@@ -52,6 +55,10 @@ class CollisionSettings:
     crop_radius: float = 15.0  # horizontal distance to the nearest capture position
     height_band: tuple[float, float] = (-4.0, 4.0)  # along up, relative to that position's height
     min_component_faces: int = 50
+    # Upward faces more than this far above the nearest capture position are the hidden back sides
+    # of ceilings, roofs and canopies seen from below (marching cubes closes every scanned layer
+    # into a slab); dropped so they cannot become phantom walkable islands. None = keep them.
+    drop_tops_above_capture: float | None = 0.5
     min_points_per_voxel: int = 1
     close_iterations: int = 1  # binary closing (6-connected) to bridge scan-line gaps; 0 = off
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
@@ -136,6 +143,24 @@ def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int) 
     used[faces.reshape(-1)] = True
     remap = np.cumsum(used) - 1
     return verts[used], remap[faces]
+
+
+def unseen_top_faces(verts_nav: np.ndarray, faces: np.ndarray, centers_nav: np.ndarray, above: float,
+                     min_normal_z: float = 0.5, chunk: int = 1_000_000) -> np.ndarray:
+    """`bool [F]`: faces pointing up (nav normal z > `min_normal_z`) whose centre lies more than
+    `above` metres over the nearest (xy) capture position. A LiDAR carried along the trajectory
+    cannot have seen such a top: it is the closing side of a ceiling/roof/canopy slab."""
+    out = np.zeros(faces.shape[0], dtype=bool)
+    tree = cKDTree(centers_nav[:, :2])
+    for s in range(0, faces.shape[0], chunk):
+        tri = verts_nav[faces[s:s + chunk]]  # [f,3,3]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        nz = n[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-12)
+        cand = np.flatnonzero(nz > min_normal_z)
+        c = tri[cand].mean(1)
+        _, idx = tree.query(c[:, :2])
+        out[s + cand] = c[:, 2] > centers_nav[idx, 2] + above
+    return out
 
 
 def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,
@@ -235,15 +260,19 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     del grid
     timings["marching_cubes_s"] = time.perf_counter() - t3
 
-    # 4. small components
-    t3 = time.perf_counter()
-    n_before = int(faces.shape[0])
-    verts_idx, faces = drop_small_components(verts_idx, faces, cfg.min_component_faces)
-    timings["components_s"] = time.perf_counter() - t3
-    meta["faces_before_filter"] = n_before
-
     # voxel (i,j,k) centre sits at origin + (ijk + 0.5) * vox; marching cubes works on centres
     verts_nav = origin + (verts_idx + 0.5) * vox
+    n_before = int(faces.shape[0])
+
+    # 4. hidden tops, then small components
+    t4 = time.perf_counter()
+    if cfg.drop_tops_above_capture is not None and cams.shape[0]:
+        keep_f = ~unseen_top_faces(verts_nav, faces, cams @ Rn.T, cfg.drop_tops_above_capture)
+        meta["hidden_top_faces_dropped"] = int((~keep_f).sum())
+        faces = faces[keep_f]
+    verts_nav, faces = drop_small_components(verts_nav, faces, cfg.min_component_faces)
+    timings["components_s"] = time.perf_counter() - t4
+    meta["faces_before_filter"] = n_before
     verts_scene = verts_nav @ Rn  # row form of R^T p (R orthonormal)
     timings["total_s"] = time.perf_counter() - t0
     meta["timings"] = timings
