@@ -272,3 +272,22 @@ def test_splat_render_looks_like_the_raycast_images(scene):
     mse = ((out.rgb.numpy() - gt) ** 2).mean(-1)[m].mean()
     assert -10 * np.log10(mse) > 17.0
     assert (out.alpha[..., 0].numpy()[m] > 0.5).mean() > 0.95
+
+
+def test_raycast_backends_agree():
+    """Embree's hits against the dependency-free numpy reference, on rays from the capture rig."""
+    from wanderland_nav.scene.demo import capture
+
+    lay = L.build_layout(0)
+    fast, ref = RayCaster(lay.vertices, lay.faces), RayCaster(lay.vertices, lay.faces, backend="numpy")
+    assert fast.backend == "embree"  # the demo build relies on it (pip install embreex)
+    rng = np.random.default_rng(0)
+    rig = capture.make_rig(6.0, 0, 8.0)
+    o = rig.position[rng.integers(0, len(rig.position), 1500)]
+    d = rng.normal(size=(1500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t1, i1 = fast.cast(o, d)
+    t2, i2 = ref.cast(o, d)
+    assert (i1 == i2).mean() > 0.995 and ((i1 >= 0) == (i2 >= 0)).mean() > 0.998
+    both = (i1 == i2) & (i1 >= 0)
+    np.testing.assert_allclose(t1[both], t2[both], atol=1e-9)
