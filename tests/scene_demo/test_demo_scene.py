@@ -291,3 +291,15 @@ def test_raycast_backends_agree():
     assert (i1 == i2).mean() > 0.995 and ((i1 >= 0) == (i2 >= 0)).mean() > 0.998
     both = (i1 == i2) & (i1 >= 0)
     np.testing.assert_allclose(t1[both], t2[both], atol=1e-9)
+
+
+def test_transforms_json_poses_match_colmap(scene, tiny_demo_scene, tmp_path):
+    """transforms.json (nerfstudio, OpenGL camera axes) and the COLMAP model describe the same cameras."""
+    dst = tmp_path / "no_sparse"
+    shutil.copytree(tiny_demo_scene, dst, ignore=shutil.ignore_patterns("sparse", "3dgs.ply"))
+    tj = load_scene(dst)
+    a = {c.name: c for c in scene.cameras}
+    assert len(tj.cameras) == len(a)
+    for c in tj.cameras:
+        np.testing.assert_allclose(c.world_from_cam, a[c.name].world_from_cam, atol=1e-6)
+        np.testing.assert_allclose(c.K, a[c.name].K)
