@@ -44,7 +44,7 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
     """(SCENE) A copy of the tiny demo with `collision_mesh.ply` + `navmesh.npz` from `prepare_scene`.
 
     Copied so the demo fixture's own folder stays as `make_demo_scene` wrote it. Collision voxels
-    of 0.2 m (test size); navmesh with the default `NavMeshSettings` (up axis from the scene).
+    of 0.25 m (test size); navmesh with the default `NavMeshSettings` (up axis from the scene).
     """
     import shutil
 
@@ -53,7 +53,7 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
 
     dst = tmp_path_factory.mktemp("prepared") / Path(tiny_demo_scene).name
     shutil.copytree(tiny_demo_scene, dst)
-    prepare_scene(dst, collision=CollisionSettings(voxel_size=0.2))
+    prepare_scene(dst, collision=CollisionSettings(voxel_size=0.25))
     return dst
 
 

@@ -26,7 +26,7 @@ def test_prepared_demo_scene_outputs(prepared_demo_scene):
     assert s.collision_mesh_path == prepared_demo_scene / "collision_mesh.ply"
     assert s.navmesh_path == prepared_demo_scene / "navmesh.npz"
     side = json.loads((prepared_demo_scene / "collision_mesh.json").read_text())
-    assert side["up_axis"] == "-y" and side["settings"]["voxel_size"] == 0.2 and side["faces"] > 1000
+    assert side["up_axis"] == "-y" and side["settings"]["voxel_size"] == 0.25 and side["faces"] > 1000
     mesh = trimesh.load(s.collision_mesh_path, process=False)
     assert len(mesh.faces) == side["faces"]
     # scene frame preserved (-y up): the walkable ground (most upward-facing area) lies near the
