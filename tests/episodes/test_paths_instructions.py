@@ -75,3 +75,21 @@ def test_goal_radius_shrinks_for_short_episodes():
     np.testing.assert_allclose(s.goal_radius_for(np.array([1.0, 5.0, 10.0, 40.0])), [0.5, 1.5, 3.0, 3.0])
     with pytest.raises(ValueError, match="max_geodesic"):
         SamplerSettings(min_geodesic=10, max_geodesic=5)
+
+
+def test_obstacle_hugging_kinks_read_as_one_turn():
+    # 8 m east, then two 45-degree kinks 1 m apart (a corner cut by the funnel), then 7 m north:
+    # one left turn; the 0.2 m wiggle on the last leg disappears in the simplification
+    r = _route([[0, 0, 0], [8, 0, 0], [8.7, 0.7, 0], [8.7, 4.0, 0], [8.9, 5.5, 0], [8.7, 7.7, 0]])
+    legs = route_legs(r)
+    assert len(legs) == 2
+    assert legs[1].turn_before == pytest.approx(np.pi / 2, abs=0.15)  # simplification keeps one of the kinks
+    assert sum(leg.length for leg in legs) == pytest.approx(polyline_length(r.corners_nav), rel=0.05)
+
+
+def test_resample_horizontal_ignores_climb():
+    p = np.array([[0.0, 0, 0], [2.0, 0, 1.0]])  # 2 m across, 1 m up
+    r = resample_polyline(p, 0.25, horizontal=True)
+    assert len(r) == 9
+    np.testing.assert_allclose(np.diff(r[:, 0]), 0.25)
+    np.testing.assert_allclose(r[:, 2], r[:, 0] / 2)

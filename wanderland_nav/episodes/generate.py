@@ -152,11 +152,14 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     dec = settings.decimals
 
     # dense, on-surface expert locations for every episode in one snap call
-    dense = [resample_polyline(p, settings.step_size) for p in pairs.paths]
+    # every step_size metres on the ground plane (nav frame), back to the scene frame
+    dense = [resample_polyline(p @ R_ns.T, settings.step_size, horizontal=True) @ R_ns for p in pairs.paths]
     counts = np.array([len(d) for d in dense], dtype=np.int64)
     flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
     if len(flat):
-        flat = np.asarray(navmesh.snap_point(flat), dtype=np.float64)  # heights from the navmesh surface
+        # heights from the navmesh surface: the linear interpolation between corners is on the mesh
+        # horizontally (the funnel path stays inside its corridor) but not vertically on slopes
+        flat = np.asarray(navmesh.snap_point(flat, max_distance=1e9), dtype=np.float64)
         indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
     else:
         indoor_flat = np.zeros(0, dtype=bool)
@@ -233,13 +236,22 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
 
 
 def navmesh_fingerprint(navmesh_path: Path | None) -> str:
-    """sha256 over the navmesh arrays (not the .npz bytes: zip headers carry timestamps)."""
+    """sha256 over the navmesh arrays, not the .npz bytes: zip headers carry timestamps and the
+    planner's `meta` record carries the bake time, neither of which changes a single episode."""
     h = hashlib.sha256()
     if navmesh_path is None or not Path(navmesh_path).is_file():
         return "none"
     with np.load(navmesh_path, allow_pickle=False) as z:
         for k in sorted(z.files):
             a = np.ascontiguousarray(z[k])
+            if k == "meta" and a.dtype.kind == "U":
+                try:
+                    meta = json.loads(str(z[k][()]))
+                except ValueError:
+                    meta = None
+                if isinstance(meta, dict):
+                    meta = {mk: mv for mk, mv in meta.items() if "seconds" not in mk and "time" not in mk}
+                    a = np.asarray(json.dumps(meta, sort_keys=True))
             h.update(k.encode()); h.update(str(a.dtype).encode()); h.update(str(a.shape).encode()); h.update(a.tobytes())
     return h.hexdigest()
 

@@ -60,56 +60,88 @@ class Leg:
     door: str | None  # None | "enter" | "exit" (indoor/outdoor change during the leg)
 
 
-def route_legs(route: Route, *, min_turn_deg: float = 25.0, min_climb: float = 0.6,
-               stairs_slope: float = 0.35, min_leg: float = 0.5) -> list[Leg]:
+def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker on the ground plane: keep corners deviating > `tolerance` m (xy).
+
+    Navmesh shortest paths hug obstacle corners with many small kinks that no person would
+    mention; the instruction is about the route's shape at walking scale. Returns the kept rows.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) <= 2:
+        return p
+    keep = np.zeros(len(p), dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(p) - 1)]
+    while stack:  # iterative over segments (few corners per path)
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        ab = p[b, :2] - p[a, :2]
+        n = np.linalg.norm(ab)
+        rel = p[a + 1:b, :2] - p[a, :2]
+        d = np.abs(ab[0] * rel[:, 1] - ab[1] * rel[:, 0]) / n if n > 1e-9 else np.linalg.norm(rel, axis=-1)
+        k = int(np.argmax(d))
+        if d[k] > tolerance:
+            m = a + 1 + k
+            keep[m] = True
+            stack += [(a, m), (m, b)]
+    return p[keep]
+
+
+def route_legs(route: Route, *, simplify_tol: float = 0.75, min_turn_deg: float = 25.0, min_leg: float = 1.5,
+               min_climb: float = 0.6, stairs_slope: float = 0.35) -> list[Leg]:
     """Cut the corner path into legs at turns >= `min_turn_deg`.
 
-    Corners closer than `min_leg` are merged first (navmesh paths hug obstacles with many tiny
-    kinks). A leg whose height changes by >= `min_climb` is a climb: "stairs" when the rise over
-    run exceeds `stairs_slope` (stairs on a navmesh show up as ~30-35 degree slopes), else "ramp".
+    The path is first simplified (`simplify_polyline`, `simplify_tol` m); a leg shorter than
+    `min_leg` is folded into the next one (their turns add up), so "bear left, walk two steps,
+    bear left" reads as one left turn. A leg whose height changes by >= `min_climb` is a climb:
+    "stairs" when rise over run exceeds `stairs_slope` (navmesh stairs are ~30-35 degree
+    slopes), else "ramp". The indoor flags of the dense path tell where the route enters or
+    leaves a building.
     """
-    c = np.asarray(route.corners_nav, dtype=np.float64)
-    # merge near-duplicate corners, always keeping the first and the last
-    keep = [0]
-    for i in range(1, len(c) - 1):
-        if np.linalg.norm(c[i, :2] - c[keep[-1], :2]) >= min_leg:
-            keep.append(i)
-    if len(c) > 1:
-        if len(keep) > 1 and np.linalg.norm(c[-1, :2] - c[keep[-1], :2]) < min_leg:
-            keep[-1] = len(c) - 1
-        else:
-            keep.append(len(c) - 1)
-    c = c[keep]
+    c = simplify_polyline(route.corners_nav, simplify_tol)
     if len(c) < 2:
         return [Leg(0.0, 0.0, 0.0, None, None)]
     d = np.diff(c, axis=0)  # [S, 3]
     horiz = np.linalg.norm(d[:, :2], axis=-1)
     yaw = np.arctan2(d[:, 1], d[:, 0])
-    turn = np.concatenate([[0.0], (np.diff(yaw) + np.pi) % (2 * np.pi) - np.pi])  # [S]
-    # group segments into legs: a new leg starts where the turn is large
-    starts = [0] + [i for i in range(1, len(d)) if abs(np.degrees(turn[i])) >= min_turn_deg]
-    bounds = starts + [len(d)]
-    # arc length of each corner, to map the dense indoor flags onto legs
+    turn = np.concatenate([[0.0], _wrap(np.diff(yaw))])  # [S] turn at the start of each segment
+    corner_s = np.concatenate([[0.0], np.cumsum(horiz)])  # arc length (horizontal) of each corner
+    # raw legs: [first segment, last segment) split at large turns
+    cuts = [0] + [i for i in range(1, len(d)) if abs(np.degrees(turn[i])) >= min_turn_deg] + [len(d)]
+    raw = [(a, b, float(turn[a]) if a > 0 else 0.0) for a, b in zip(cuts[:-1], cuts[1:])]
+    # fold short legs into the next one (never the last leg, which ends at the goal)
+    merged: list[list] = []
+    carry = 0.0
+    for j, (a, b, t) in enumerate(raw):
+        t = _wrap(t + carry)
+        carry = 0.0
+        if merged and horiz[a:b].sum() < min_leg and j < len(raw) - 1:
+            carry = t
+            merged[-1][1] = b  # walk it as part of the previous leg's distance
+            continue
+        merged.append([a, b, t])
     dense = np.asarray(route.dense_nav, dtype=np.float64)
     dense_s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense[:, :2], axis=0), axis=-1))])
-    corner_s = np.concatenate([[0.0], np.cumsum(horiz)])
     indoor = np.asarray(route.indoor, dtype=bool)
     legs = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
+    for a, b, t in merged:
         length = float(horiz[a:b].sum())
         dz = float(c[b, 2] - c[a, 2])
-        run = max(length, 1e-6)
         climb = None
         if abs(dz) >= min_climb:
-            climb = "stairs" if abs(dz) / run > stairs_slope else "ramp"
+            climb = "stairs" if abs(dz) / max(length, 1e-6) > stairs_slope else "ramp"
         door = None
         if indoor.size:
-            sel = (dense_s >= corner_s[a] - 1e-6) & (dense_s <= corner_s[b] + 1e-6)
-            flags = indoor[sel]
+            flags = indoor[(dense_s >= corner_s[a] - 1e-6) & (dense_s <= corner_s[b] + 1e-6)]
             if flags.size >= 2 and flags[0] != flags[-1]:
                 door = "enter" if flags[-1] else "exit"
-        legs.append(Leg(length, float(turn[a]) if a > 0 else 0.0, dz, climb, door))
+        legs.append(Leg(length, float(t), dz, climb, door))
     return legs
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 # --------------------------------------------------------------------------- wording

@@ -11,8 +11,11 @@ def polyline_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(p, axis=0), axis=-1).sum()) if len(p) > 1 else 0.0
 
 
-def resample_polyline(points: np.ndarray, step: float) -> np.ndarray:
-    """Points every `step` metres of 3D arc length along `[P, 3]`, plus the exact end point.
+def resample_polyline(points: np.ndarray, step: float, *, horizontal: bool = False) -> np.ndarray:
+    """Points every `step` metres of arc length along `[P, 3]`, plus the exact end point.
+
+    `horizontal=True` measures arc length on x, y only (pass nav-frame points): the agent's
+    0.25 m forward step is a ground-plane distance, whatever the path climbs.
 
     Returns `[L, 3]` with `L = floor(length / step) + 1` (+1 if the end is not already on the grid),
     so the expert takes `L - 1` moves of at most `step` each. Interpolation is linear between
@@ -23,7 +26,7 @@ def resample_polyline(points: np.ndarray, step: float) -> np.ndarray:
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 1:
         return p.copy()
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=-1)  # [P-1]
+    seg = np.linalg.norm(np.diff(p[:, :2] if horizontal else p, axis=0), axis=-1)  # [P-1]
     cum = np.concatenate([[0.0], np.cumsum(seg)])  # [P]
     total = cum[-1]
     s = np.arange(0.0, total + 1e-9, step)  # [L]

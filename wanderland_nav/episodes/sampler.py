@@ -20,8 +20,9 @@ import torch
 
 #: every reason a candidate pair can be thrown away, in the order the filters run
 REJECTION_REASONS = (
-    "not_near_camera",   # snapped start or goal left the camera radius (or fell to another floor)
-    "different_island",  # start and goal on disconnected parts of the navmesh
+    "off_mesh",          # the drawn ground point was not over the navmesh (snapping would put it on an edge)
+    "not_near_camera",   # snapped start left the camera radius, fell to another floor or off the mesh
+    "different_island",  # no goal candidate on the start's navmesh island
     "unreachable",       # same island by id, but the planner found no path
     "too_short",         # geodesic < min_geodesic
     "too_long",          # geodesic > max_geodesic
@@ -119,7 +120,10 @@ class EndpointSampler:
         return p_nav @ self.R_ns
 
     def _snap(self, p_scene: np.ndarray) -> np.ndarray:
-        return np.asarray(self.navmesh.snap_point(np.asarray(p_scene, dtype=np.float64)), dtype=np.float64)
+        # no snap limit here (the planner's default is ~1 m): how far a point moved is judged by
+        # near_camera() afterwards, per point, instead of one far point failing the whole batch
+        return np.asarray(self.navmesh.snap_point(np.asarray(p_scene, dtype=np.float64), max_distance=1e9),
+                          dtype=np.float64)
 
     def near_camera(self, p_scene: np.ndarray, chunk: int = 4096) -> np.ndarray:
         """`bool [N]`: within `camera_radius` (ground plane) of a camera that is at most
@@ -134,15 +138,31 @@ class EndpointSampler:
             out[i:i + chunk] = ((d2 <= r2) & (dz <= self.s.camera_max_drop)).any(-1)
         return out
 
-    def draw_points(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """`[n, 3]` scene-frame navmesh points drawn uniformly in discs around random usable cameras."""
+    def draw_points(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Points drawn uniformly in discs around random usable cameras, put on the navmesh.
+
+        Returns `[n, 3]` scene-frame snapped points and `bool [n]` "on mesh": the drawn ground
+        point was over the navmesh (snapping moved it < 5 cm sideways) and the planner calls the
+        snapped point navigable. Off-mesh draws are rejected rather than kept on the navmesh edge,
+        so starts and goals are uniform over the walkable area and never pressed against a wall.
+        """
         cam = self.usable[rng.integers(len(self.usable), size=n)]
         rad = self.s.camera_radius * np.sqrt(rng.random(n))
         ang = rng.random(n) * 2 * np.pi
         p = self.ground_nav[cam].copy()
         p[:, 0] = self.cams_nav[cam, 0] + rad * np.cos(ang)
         p[:, 1] = self.cams_nav[cam, 1] + rad * np.sin(ang)
-        return self._snap(self._to_scene(p))
+        raw = self._to_scene(p)
+        # cheap point location first (within 1.5 m of the camera's ground level, so the right floor);
+        # only those draws are snapped (the exhaustive closest-point search is for off-mesh points)
+        over = np.asarray(self.navmesh.is_navigable(raw, max_height_delta=1.5), dtype=bool).reshape(-1)
+        snapped = raw.copy()
+        on = np.zeros(n, dtype=bool)
+        if over.any():
+            snapped[over] = self._snap(raw[over])
+            moved = np.linalg.norm(self._to_nav(snapped[over])[:, :2] - p[over, :2], axis=-1)
+            on[over] = (moved < 0.05) & np.asarray(self.navmesh.is_navigable(snapped[over]), dtype=bool).reshape(-1)
+        return snapped, on
 
     # ----------------------------------------------------------------- main loop
 
@@ -157,17 +177,28 @@ class EndpointSampler:
         while len(acc_s) < num and rounds < s.max_rounds:
             rounds += 1
             drawn += K
-            pts = self.draw_points(2 * K, rng)  # [2K, 3]
+            pts, on = self.draw_points(2 * K, rng)  # [2K, 3], [2K]
             keep_u = rng.random(K)  # drawn every round so the stream does not depend on filters
-            st, go = pts[:K], pts[K:]
-            near = self.near_camera(pts)
-            m = near[:K] & near[K:]
-            rej["not_near_camera"] += int((~m).sum())
-            isl_s = np.asarray(self.navmesh.island_of(st)).astype(np.int64)
-            isl_g = np.asarray(self.navmesh.island_of(go)).astype(np.int64)
-            same = (isl_s == isl_g) & (isl_s >= 0)
-            rej["different_island"] += int((m & ~same).sum())
-            m &= same
+            pick_u = rng.random(K)
+            near = self.near_camera(pts) & on
+            isl = np.asarray(self.navmesh.island_of(pts, max_distance=0.05)).astype(np.int64)  # [2K]
+            st, isl_s, m = pts[:K], isl[:K], near[:K] & (isl[:K] >= 0)
+            rej["off_mesh"] += int((~on[:K]).sum())
+            # pair every start with a random goal from the second half ON ITS ISLAND (scenes split into
+            # many islands would otherwise waste most pairs): goals grouped by island, index by pick_u
+            g_ok = near[K:] & (isl[K:] >= 0)
+            g_idx = K + np.flatnonzero(g_ok)
+            order = np.argsort(isl[g_idx], kind="stable")
+            g_idx, g_isl = g_idx[order], isl[g_idx][order]
+            lo = np.searchsorted(g_isl, isl_s, side="left")
+            cnt = np.searchsorted(g_isl, isl_s, side="right") - lo
+            rej["not_near_camera"] += int((~m & on[:K]).sum())
+            has_goal = m & (cnt > 0)
+            rej["different_island"] += int((m & ~has_goal).sum())
+            m = has_goal
+            choice = g_idx[np.clip(lo + np.floor(pick_u * cnt).astype(np.int64), 0, max(len(g_idx) - 1, 0))] \
+                if len(g_idx) else np.zeros(K, dtype=np.int64)
+            go = pts[np.where(m, choice, K)]  # [K, 3]; rows with m False are ignored below
             idx = np.flatnonzero(m)
             if idx.size == 0:
                 continue

@@ -25,6 +25,12 @@ def _navmesh_triangles_nav(navmesh, R_ns: np.ndarray) -> np.ndarray | None:
             tri = np.asarray(tri, dtype=np.float64)
             if tri.ndim == 3 and tri.shape[1:] == (3, 3):
                 return tri @ R_ns.T
+    # planners.NavMesh keeps its triangles in a local nav frame offset by bmin (xy and z separately)
+    if all(hasattr(navmesh, k) for k in ("verts_xy", "verts_z", "tris", "bmin")):
+        t = np.asarray(navmesh.tris)
+        if t.ndim == 2 and t.shape[1] == 3:
+            loc = np.concatenate([np.asarray(navmesh.verts_xy)[t], np.asarray(navmesh.verts_z)[t][..., None]], -1)
+            return loc.astype(np.float64) + np.asarray(navmesh.bmin, dtype=np.float64)
     verts, faces = getattr(navmesh, "vertices", None), getattr(navmesh, "faces", None)
     if verts is not None and faces is not None:
         v = np.asarray(verts, dtype=np.float64) @ R_ns.T
