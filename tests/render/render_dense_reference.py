@@ -112,3 +112,26 @@ def dense_rasterization(means, quats, scales, opacities, colors, viewmats, Ks, w
         outs.append(out.reshape(height, width, -1))
         alphas.append(al.reshape(height, width, 1))
     return torch.stack(outs), torch.stack(alphas)
+
+
+def random_scene(n: int, C: int, W: int, H: int, dtype=torch.float64, seed: int = 0, sh_degree=None,
+                 opaque: bool = False):
+    """Random Gaussians in front of C cameras orbiting the origin at distance 3 (all OpenCV)."""
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g, dtype=dtype) * 0.6
+    quats = torch.randn(n, 4, generator=g, dtype=dtype)
+    scales = torch.exp(torch.randn(n, 3, generator=g, dtype=dtype) * 0.5 - 2.5)
+    lo, span = (0.5, 1.0) if opaque else (0.05, 0.9)
+    opacities = (torch.rand(n, generator=g, dtype=dtype) * span + lo).clamp(max=1.0)
+    if sh_degree is None:
+        colors = torch.rand(n, 3, generator=g, dtype=dtype)
+    else:
+        colors = torch.randn(n, (sh_degree + 1) ** 2, 3, generator=g, dtype=dtype) * 0.3
+    viewmats = torch.eye(4, dtype=dtype).repeat(C, 1, 1)
+    for c in range(C):
+        ang = 0.4 * c
+        viewmats[c, :3, :3] = torch.tensor([[math.cos(ang), 0, -math.sin(ang)], [0, 1, 0],
+                                            [math.sin(ang), 0, math.cos(ang)]], dtype=dtype)
+        viewmats[c, :3, 3] = torch.tensor([0.05 * c, -0.1, 3.0], dtype=dtype)
+    Ks = torch.tensor([[W * 0.9, 0, W / 2 + 0.3], [0, W * 0.9, H / 2 - 0.2], [0, 0, 1]], dtype=dtype).repeat(C, 1, 1)
+    return means, quats, scales, opacities, colors, viewmats, Ks

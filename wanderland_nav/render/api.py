@@ -43,7 +43,7 @@ def rasterization(
     eps2d: float = 0.3,
     sh_degree: int | None = None,
     packed: bool = True,
-    tile_size: int = 16,
+    tile_size: int | None = None,
     backgrounds: torch.Tensor | None = None,  # [C, D]
     render_mode: str = "RGB",
     sparse_grad: bool = False,
@@ -65,7 +65,9 @@ def rasterization(
     """Render N Gaussians into C cameras with gsplat 1.5 semantics (see `rasterize.py`).
 
     `packed`, `channel_chunk` and `segmented` only change how gsplat schedules its CUDA work; the
-    images are the same, and `meta` always uses the dense `[C, N, ...]` layout. Options that would
+    images are the same, and `meta` always uses the dense `[C, N, ...]` layout. `tile_size` is a
+    pure performance knob here too (results do not depend on it); None picks 4 on CPU, where small
+    tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
     lens distortion coefficients) raise instead of being silently ignored.
     """
@@ -95,6 +97,9 @@ def rasterization(
         _check(covars.shape == (N, 3, 3), f"covars must be [N, 3, 3], got {tuple(covars.shape)}")
     dtype = means.dtype
     viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
+    if tile_size is None:
+        tile_size = 4 if means.device.type == "cpu" else 16
+    _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
 
     proj = project_gaussians(means, covars, viewmats, Ks, int(width), int(height), eps2d=eps2d,
                              near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,

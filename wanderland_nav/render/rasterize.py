@@ -33,7 +33,7 @@ import torch
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.999
 T_EPS = 1e-4
-DEFAULT_CHUNK_ELEMS = 1 << 19  # floats per [tiles, pixels, gaussians] temporary (2 MiB in float32)
+DEFAULT_CHUNK_ELEMS = 1 << 17  # floats per [pixels, tiles, gaussians] temporary (512 KiB in float32: about L2)
 
 
 # --------------------------------------------------------------------------------------------
@@ -64,36 +64,39 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
         vis = ((radii > 0).all(-1)).reshape(-1).nonzero().squeeze(1)  # [V]
         V = vis.numel()
         if V == 0:
-            return vis, torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(num_tiles, dtype=torch.long, device=dev)
-        m = means2d.detach().reshape(-1, 2)[vis].to(torch.float64)
-        r = radii.reshape(-1, 2)[vis].to(torch.float64)
-        x0 = torch.floor((m[:, 0] - r[:, 0]) / tile_size).clamp(0, tile_width).long()
-        x1 = torch.ceil((m[:, 0] + r[:, 0]) / tile_size).clamp(0, tile_width).long()
-        y0 = torch.floor((m[:, 1] - r[:, 1]) / tile_size).clamp(0, tile_height).long()
-        y1 = torch.ceil((m[:, 1] + r[:, 1]) / tile_size).clamp(0, tile_height).long()
-        wx = (x1 - x0).clamp_min(0)
-        cnt = wx * (y1 - y0).clamp_min(0)  # [V] tiles per Gaussian
-        # depth rank of each visible Gaussian (exact order via integer radix sort, stable for ties)
-        order = torch.sort(_sortable_int(depths.detach().reshape(-1)[vis]), stable=True).indices
+            empty = torch.zeros(0, dtype=torch.long, device=dev)
+            return vis, empty, torch.zeros(num_tiles, dtype=torch.long, device=dev)
+        m = means2d.detach().reshape(-1, 2).index_select(0, vis)
+        r = radii.reshape(-1, 2).index_select(0, vis).to(m.dtype)
+        x0 = torch.floor((m[:, 0] - r[:, 0]) / tile_size).clamp_(0, tile_width).long()
+        x1 = torch.ceil((m[:, 0] + r[:, 0]) / tile_size).clamp_(0, tile_width).long()
+        y0 = torch.floor((m[:, 1] - r[:, 1]) / tile_size).clamp_(0, tile_height).long()
+        y1 = torch.ceil((m[:, 1] + r[:, 1]) / tile_size).clamp_(0, tile_height).long()
+        wx = (x1 - x0).clamp_(min=0)
+        cnt = wx * (y1 - y0).clamp_(min=0)  # [V] tiles per Gaussian
+        # depth rank of each visible Gaussian: exact order via an integer radix sort (stable on ties)
+        order = torch.sort(_sortable_int(depths.detach().reshape(-1).index_select(0, vis)), stable=True).indices
         rank = torch.empty_like(order)
         rank[order] = torch.arange(V, device=dev)
+        # per-Gaussian base key: camera tile-row origin and depth rank, expanded once per covered tile
+        cam = torch.div(vis, N, rounding_mode="floor")
+        base = ((cam * tile_height + y0) * tile_width + x0) * V + rank  # key of the Gaussian's first tile
         M = int(cnt.sum())
         g = torch.repeat_interleave(torch.arange(V, device=dev), cnt, output_size=M)  # [M]
-        first = torch.cumsum(cnt, 0) - cnt
-        k = torch.arange(M, device=dev) - first[g]
-        wg = wx[g]
-        tx = x0[g] + k % wg
-        ty = y0[g] + torch.div(k, wg, rounding_mode="floor")
-        cam = torch.div(vis[g], N, rounding_mode="floor")
-        tile = (cam * tile_height + ty) * tile_width + tx
-        key, perm = torch.sort(tile * V + rank[g])
-        ent = g[perm]
+        k = torch.arange(M, device=dev) - (torch.cumsum(cnt, 0) - cnt).index_select(0, g)
+        wg = wx.index_select(0, g)
+        dy = torch.div(k, wg, rounding_mode="floor")
+        dx = k - dy * wg
+        key = base.index_select(0, g) + (dy * tile_width + dx) * V
+        key, perm = torch.sort(key)
+        ent = g.index_select(0, perm)
         counts = torch.bincount(torch.div(key, V, rounding_mode="floor"), minlength=num_tiles)
     return vis, ent, counts
 
 
 # --------------------------------------------------------------------------------------------
-# Chunk kernels (shared by forward and backward)
+# Chunk kernels (shared by forward and backward). Layout: pixels first, [P, Ta, L], so that the
+# quadratic form of a whole chunk is ONE GEMM feat[P,6] @ q[6, Ta*L].
 # --------------------------------------------------------------------------------------------
 def _pixel_features(tile_size: int, dtype, device) -> torch.Tensor:
     """[P, 6] monomials (u^2, v^2, uv, u, v, 1) of tile-local pixel-centre coordinates, P = ts^2 row-major."""
@@ -103,49 +106,68 @@ def _pixel_features(tile_size: int, dtype, device) -> torch.Tensor:
     return torch.stack([u * u, v * v, u * v, u, v, torch.ones_like(u)], dim=-1)
 
 
-def _quad_coefs(p: torch.Tensor, center: torch.Tensor, valid: torch.Tensor):
+def _alpha_threshold(dtype) -> float:
+    """Largest value below 1/255 in `dtype`, so `threshold(x, t)` keeps exactly x >= 1/255."""
+    one = torch.tensor(ALPHA_MIN, dtype=dtype)
+    return torch.nextafter(one, torch.zeros((), dtype=dtype)).item()
+
+
+def _quad_coefs(rows: torch.Tensor, center: torch.Tensor, valid: torch.Tensor):
     """-(sigma - log o) as coefficients over the pixel features.
 
-    p [Ta, L, 6+] rows (mx, my, a, b, c, log_o, ...), center [Ta, 2] tile centres, valid [Ta, L].
-    Returns q [Ta, 6, L] and the tile-relative means (mx, my) [Ta, L] each (for the backward).
+    rows [Ta, L, K] = (mx, my, a, b, c, log_o, colours..., 1), center [Ta, 2] tile centres, valid [Ta, L].
+    Returns q [6, Ta, L] and the tile-relative means mx, my [Ta, L] (for the backward).
+    Tile-relative means keep the expanded quadratic well conditioned in float32.
     """
-    mx = p[..., 0] - center[:, 0:1]
-    my = p[..., 1] - center[:, 1:2]
-    a, b, c, lo = p[..., 2], p[..., 3], p[..., 4], p[..., 5]
+    mx = rows[..., 0] - center[:, 0:1]
+    my = rows[..., 1] - center[:, 1:2]
+    a, b, c, lo = rows[..., 2], rows[..., 3], rows[..., 4], rows[..., 5]
     amb = a * mx + b * my
     bmc = b * mx + c * my
-    const = 0.5 * (mx * amb + my * bmc) - lo  # 0.5 a mx^2 + b mx my + 0.5 c my^2 - log o
-    const = const.masked_fill(~valid, math.inf)  # padding entries: alpha = exp(-inf) = 0
-    lin = torch.stack([-0.5 * a, -0.5 * c, -b, amb, bmc], dim=1).masked_fill(~valid[:, None, :], 0.0)
-    q = torch.cat([lin, -const[:, None, :]], dim=1)  # [Ta, 6, L]
+    neg_const = lo - 0.5 * (mx * amb + my * bmc)  # log o - (0.5 a mx^2 + b mx my + 0.5 c my^2)
+    q = torch.stack([-0.5 * a, -0.5 * c, -b, amb, bmc, neg_const], dim=0)  # [6, Ta, L]
+    q.masked_fill_(~valid, 0.0)
+    q[5].masked_fill_(~valid, -math.inf)  # padding entries: alpha = exp(-inf) = 0
     return q, mx, my
 
 
-def _composite_chunk(feat, q, T_in):
-    """Alpha and weights of one chunk. feat [P,6], q [Ta,6,L], T_in [Ta,P] (0 = finished pixel).
+def _alpha_raw(feat: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+    """o exp(-sigma) for every pixel and entry, [P, Ta, L]. The clamp at -30 avoids denormals from exp
+    (about 100x slower on x86); anything below log(1/255) is skipped anyway, so no result changes."""
+    P = feat.shape[0]
+    _, Ta, L = q.shape
+    return torch.mm(feat, q.view(6, Ta * L)).view(P, Ta, L).clamp_(min=-30.0).exp_()
 
-    Returns alpha_raw [Ta,P,L] (o exp(-sigma)), alpha (clamped, 0 where skipped), nT (transmittance
-    after each Gaussian, zeroed at/after termination), w (alpha_j T_j, 0 when excluded).
+
+def _transmittance(alpha: torch.Tensor, T_in: torch.Tensor, check_termination: bool):
+    """Front-to-back transmittance of one chunk.
+
+    alpha [P,Ta,L] (clamped, 0 where skipped), T_in [P,Ta] (0 for finished pixels).
+    Returns nT [P,Ta,L] (transmittance after each entry, 0 once the pixel terminated) and
+    w [P,Ta,L] = alpha_j T_j (0 for entries at/after termination). `alpha` is consumed (becomes w).
     """
-    alpha_raw = torch.matmul(feat, q).exp_()  # [Ta, P, L]
-    alpha = alpha_raw.clamp(max=ALPHA_MAX)
-    alpha = torch.where(alpha >= ALPHA_MIN, alpha, torch.zeros((), dtype=alpha.dtype, device=alpha.device))
     nT = torch.rsub(alpha, 1.0)
     nT[:, :, 0].mul_(T_in)
-    nT = nT.cumprod_(dim=-1)
-    include = nT > T_EPS  # prefix of each pixel's row (nT is non-increasing)
-    nT.mul_(include)
-    w = alpha.clone()
+    nT.cumprod_(dim=-1)
+    w = alpha
     w[:, :, 0].mul_(T_in)
-    w[:, :, 1:].mul_(nT[:, :, :-1])  # excluded Gaussians after the first get T_excl = 0 here
-    w.mul_(include)
-    return alpha_raw, alpha, nT, w, include
+    w[:, :, 1:].mul_(nT[:, :, :-1])
+    # gsplat: a pixel stops at the first entry whose next_T <= 1e-4 (that entry excluded). nT is
+    # non-increasing, so "included" is the prefix nT > 1e-4. Finished pixels (T_in = 0) already give
+    # w = nT = 0, so masking is only needed when some pixel terminates inside this chunk.
+    if not check_termination or bool(((nT[:, :, -1] <= T_EPS) & (T_in > 0)).any()):
+        include = nT > T_EPS
+        nT.mul_(include)
+        w.mul_(include)
+    return nT, w
 
 
 # --------------------------------------------------------------------------------------------
-# Planning (host side, once per call)
+# Planning (host side, once per call) and tile geometry
 # --------------------------------------------------------------------------------------------
 class _Plan:
+    """Tile groups and list extents on the host, from one copy of the per-tile counts."""
+
     def __init__(self, counts: torch.Tensor, pixels: int, chunk_elems: int, min_chunk: int = 16):
         counts_h = counts.cpu().numpy()  # the single host sync of the rasterizer
         self.counts = counts_h
@@ -156,10 +178,24 @@ class _Plan:
         self.groups = [tiles[i:i + group] for i in range(0, len(tiles), group)]
         self.chunk_elems = chunk_elems
         self.min_chunk = min_chunk
+        self.pixels = pixels
+
+    def chunk_len(self, tiles_h: np.ndarray, consumed: int) -> int:
+        remaining = int(self.counts[tiles_h].max()) - consumed
+        cap = max(self.min_chunk, self.chunk_elems // (len(tiles_h) * self.pixels))
+        return max(1, min(remaining, cap))
+
+    def entries(self, tiles_h: np.ndarray, consumed: int, L: int, device):
+        """Entry positions j [Ta, L] (clamped into range) and their validity mask."""
+        starts = torch.as_tensor(self.starts[tiles_h] + consumed, device=device)
+        ends = torch.as_tensor(self.starts[tiles_h] + self.counts[tiles_h], device=device)
+        j = starts[:, None] + torch.arange(L, device=device)[None, :]
+        valid = j < ends[:, None]
+        return j.clamp_(max=max(int(self.starts[-1] + self.counts[-1]) - 1, 0)), valid
 
 
 class _Tiles:
-    """Static per-call tile geometry."""
+    """Static per-call tile geometry: C cameras of H x W pixels in ts x ts tiles."""
 
     def __init__(self, C, H, W, ts, dtype, device):
         self.C, self.H, self.W, self.ts = C, H, W, ts
@@ -174,13 +210,13 @@ class _Tiles:
         return torch.stack([tx, ty], -1).to(self.dtype) * self.ts + self.ts / 2.0
 
     def in_image(self, tiles: torch.Tensor) -> torch.Tensor:
-        """[Ta, P] 1 for pixels inside the image, 0 for the padding of edge tiles."""
+        """[P, Ta] 1 for pixels inside the image, 0 for the padding of edge tiles."""
         tx = tiles % self.TW
         ty = torch.div(tiles, self.TW, rounding_mode="floor") % self.TH
         r = torch.arange(self.ts, device=self.device)
         px = (tx[:, None] * self.ts + r[None, :]) < self.W  # [Ta, ts]
         py = (ty[:, None] * self.ts + r[None, :]) < self.H
-        return (py[:, :, None] & px[:, None, :]).reshape(-1, self.P).to(self.dtype)
+        return (py[:, :, None] & px[:, None, :]).reshape(-1, self.P).t().to(self.dtype).contiguous()
 
     def to_image(self, t: torch.Tensor) -> torch.Tensor:
         """[C*TH*TW, P, D] tile layout -> [C, H, W, D]."""
@@ -197,20 +233,11 @@ class _Tiles:
         return t.reshape(C * self.TH * self.TW, self.P, D)
 
 
-def _chunk_rows(plan, ent, table, tiles_h, consumed, L, device):
-    """Gather the rows of the next L entries of each active tile: rows [Ta,L,K], e [Ta,L], valid [Ta,L]."""
-    starts = torch.as_tensor(plan.starts[tiles_h] + consumed, device=device)
-    ends = torch.as_tensor(plan.starts[tiles_h] + plan.counts[tiles_h], device=device)
-    j = starts[:, None] + torch.arange(L, device=device)[None, :]
-    valid = j < ends[:, None]
-    e = ent[j.clamp(max=ent.numel() - 1)]
-    return table[e], e, valid
-
-
-def _chunk_len(plan: _Plan, geo: _Tiles, tiles_h: np.ndarray, consumed: int) -> int:
-    remaining = int(plan.counts[tiles_h].max()) - consumed
-    cap = max(plan.min_chunk, plan.chunk_elems // (len(tiles_h) * geo.P))
-    return max(1, min(remaining, cap))
+def _table(means2d, conics, opacities, colors):
+    """Per visible Gaussian row (mx, my, a, b, c, log o, colours..., 1) [V, 7+D]."""
+    lo = torch.log(opacities.clamp_min(torch.finfo(opacities.dtype).tiny))
+    one = torch.ones_like(lo)
+    return torch.cat([means2d, conics, lo[:, None], colors, one[:, None]], 1).contiguous()
 
 
 class _RasterizeFn(torch.autograd.Function):
@@ -221,35 +248,40 @@ class _RasterizeFn(torch.autograd.Function):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
+        K = D + 7
         geo = _Tiles(C, H, W, tile_size, dtype, dev)
         plan = _Plan(counts, geo.P, chunk_elems)
-        log_o = torch.log(opacities.clamp_min(torch.finfo(dtype).tiny))
-        table = torch.cat([means2d, conics, log_o[:, None], colors, torch.ones(V, 1, dtype=dtype, device=dev)], 1)
+        table = _table(means2d, conics, opacities, colors)
+        th = _alpha_threshold(dtype)
         out = torch.zeros(C * geo.TH * geo.TW, geo.P, D + 1, dtype=dtype, device=dev)
-        early = dev.type == "cpu"
+        on_cpu = dev.type == "cpu"
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
             center = geo.centers(tiles)
-            T = geo.in_image(tiles)  # [Ta, P]
-            acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)
-            pos = np.arange(len(tiles_h))  # positions of active tiles within the group arrays
+            T = geo.in_image(tiles)  # [P, Ta]
+            acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)  # [Ta, P, D+1]
             consumed = 0
             while len(tiles_h):
-                L = _chunk_len(plan, geo, tiles_h, consumed)
-                rows, _, valid = _chunk_rows(plan, ent, table, tiles_h, consumed, L, dev)
+                L = plan.chunk_len(tiles_h, consumed)
+                j, valid = plan.entries(tiles_h, consumed, L, dev)
+                rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(len(tiles_h), L, K)
                 q, _, _ = _quad_coefs(rows, center, valid)
-                _, _, nT, w, _ = _composite_chunk(geo.feat, q, T)
-                acc.baddbmm_(w, rows[..., 6:])
+                alpha = _alpha_raw(geo.feat, q).clamp_(max=ALPHA_MAX)
+                torch.nn.functional.threshold_(alpha, th, 0.0)
+                nT, w = _transmittance(alpha, T, check_termination=on_cpu)
+                acc.baddbmm_(w.permute(1, 0, 2), rows[..., 6:])
                 T = nT[:, :, -1]
                 consumed += L
                 keep = plan.counts[tiles_h] > consumed
-                if early:
-                    keep &= (T > 0).any(1).numpy()
+                if on_cpu:  # early stop of finished tiles (a free check on CPU; masks do it on GPU)
+                    keep &= (T > 0).any(0).numpy()
                 if not keep.all():
                     gone = torch.as_tensor(np.nonzero(~keep)[0], device=dev)
-                    out[tiles[gone]] = acc[gone]
+                    out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
                     kept = torch.as_tensor(np.nonzero(keep)[0], device=dev)
-                    tiles_h, tiles, center, T, acc = tiles_h[keep], tiles[kept], center[kept], T[kept], acc[kept]
+                    tiles_h = tiles_h[keep]
+                    tiles, center, acc = tiles[kept], center[kept], acc[kept]
+                    T = T.index_select(1, kept)
         img = geo.to_image(out)
         ctx.save_for_backward(means2d, conics, opacities, colors, ent, counts, img)
         ctx.cfg = (C, H, W, tile_size, chunk_elems)
@@ -261,66 +293,74 @@ class _RasterizeFn(torch.autograd.Function):
         C, H, W, tile_size, chunk_elems = ctx.cfg
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
+        K = D + 7
         geo = _Tiles(C, H, W, tile_size, dtype, dev)
         plan = _Plan(counts, geo.P, chunk_elems)
-        o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
-        table = torch.cat([means2d, conics, torch.log(o_safe)[:, None], colors,
-                           torch.ones(V, 1, dtype=dtype, device=dev)], 1)
+        table = _table(means2d, conics, opacities, colors)
+        th = _alpha_threshold(dtype)
         g_tiles = geo.from_image(g_img.contiguous())  # [NT, P, D+1]
-        total = (geo.from_image(img) * g_tiles).sum(-1)  # [NT, P] sum_j w_j (c_j . g)
-        # per-row gradient accumulators: (mx, my, a, b, c, log_o) and colours
-        g_geom = torch.zeros(V, 6, dtype=dtype, device=dev)
-        g_col = torch.zeros(V, D + 1, dtype=dtype, device=dev)
-        early = dev.type == "cpu"
-        featT = geo.feat
+        total = (geo.from_image(img) * g_tiles).sum(-1)  # [NT, P] = sum_j w_j (c_j . g), per pixel
+        g_rows = torch.zeros(V, K, dtype=dtype, device=dev)  # d/d(mx, my, a, b, c, log o, colours, 1)
+        on_cpu = dev.type == "cpu"
+        feat = geo.feat
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
             center = geo.centers(tiles)
-            T = geo.in_image(tiles)
-            gt = g_tiles[tiles]  # [Ta, P, D+1]
-            rest0 = total[tiles]  # [Ta, P] total minus what was accumulated so far
+            T = geo.in_image(tiles)  # [P, Ta]
+            gt = g_tiles.index_select(0, tiles)  # [Ta, P, D+1]
+            rest0 = total.index_select(0, tiles).t().contiguous()  # [P, Ta] what lies behind so far
             consumed = 0
             while len(tiles_h):
-                L = _chunk_len(plan, geo, tiles_h, consumed)
-                rows, e, valid = _chunk_rows(plan, ent, table, tiles_h, consumed, L, dev)
+                Ta = len(tiles_h)
+                L = plan.chunk_len(tiles_h, consumed)
+                j, valid = plan.entries(tiles_h, consumed, L, dev)
+                e = ent.index_select(0, j.view(-1))
+                rows = table.index_select(0, e).view(Ta, L, K)
                 q, mx, my = _quad_coefs(rows, center, valid)
-                alpha_raw, alpha, nT, w, include = _composite_chunk(featT, q, T)
+                alpha_raw = _alpha_raw(feat, q)  # [P, Ta, L]
+                alpha = alpha_raw.clamp(max=ALPHA_MAX)
+                torch.nn.functional.threshold_(alpha, th, 0.0)
+                om = torch.rsub(alpha, 1.0)
+                nT, w = _transmittance(alpha, T, check_termination=on_cpu)  # alpha is now w
                 col = rows[..., 6:]  # [Ta, L, D+1]
-                cg = torch.bmm(gt, col.transpose(1, 2))  # [Ta, P, L]  c_j . g
-                g_col.index_add_(0, e.reshape(-1), torch.bmm(w.transpose(1, 2), gt).reshape(-1, D + 1))
-                # rest_j = sum_{k>j} w_k cg_k = rest0 - cumsum(w cg)_j
+                cg = torch.bmm(gt, col.transpose(1, 2)).permute(1, 0, 2)  # [P, Ta, L]  c_j . g
+                g_col = torch.bmm(w.permute(1, 2, 0), gt)  # [Ta, L, D+1] sum_p w g
+                # rest_j = sum_{k>j} w_k cg_k = rest0 - cumsum_j(w cg)
                 rest = torch.mul(w, cg).cumsum_(-1).neg_().add_(rest0[:, :, None])
                 rest0 = rest[:, :, -1].clone()
-                # T_j (transmittance before j) = nT_{j-1}, T_in for j = 0; note T_j = w_j / alpha_j
+                # dL/dalpha_j = T_j cg_j - rest_j / (1 - alpha_j), with T_j = nT_{j-1} (T_in for j = 0)
                 Tj = torch.cat([T[:, :, None], nT[:, :, :-1]], dim=-1)
-                dalpha = Tj.mul_(cg).sub_(rest.div_(torch.rsub(alpha, 1.0)))
-                gate = include & (alpha > 0) & (alpha_raw <= ALPHA_MAX)
-                dA = dalpha.mul_(alpha_raw).mul_(gate)  # dL/d(-s), s = sigma - log o
-                gq = torch.matmul(dA.transpose(1, 2), featT)  # [Ta, L, 6] dL/dq
-                # q = (-a/2, -c/2, -b, a mx + b my, b mx + c my, -(0.5(a mx^2 + c my^2) + b mx my) + log o)
+                dA = Tj.mul_(cg).sub_(rest.div_(om))
+                # d alpha / d(-s) = alpha_raw where alpha is neither skipped, clamped nor excluded (w > 0)
+                dA.mul_(alpha_raw).mul_((w > 0) & (alpha_raw <= ALPHA_MAX))
+                gq = torch.mm(dA.view(geo.P, Ta * L).t(), feat).view(Ta, L, 6)  # dL/dq
+                # q = (-a/2, -c/2, -b, a mx + b my, b mx + c my, log o - 0.5(a mx^2 + c my^2) - b mx my)
                 a, b, c = rows[..., 2], rows[..., 3], rows[..., 4]
                 g0, g1, g2, g3, g4, g5 = gq.unbind(-1)
                 amb, bmc = a * mx + b * my, b * mx + c * my
-                ga = -0.5 * g0 + g3 * mx - 0.5 * g5 * mx * mx
-                gc = -0.5 * g1 + g4 * my - 0.5 * g5 * my * my
-                gb = -g2 + g3 * my + g4 * mx - g5 * mx * my
-                gmx = g3 * a + g4 * b - g5 * amb
-                gmy = g3 * b + g4 * c - g5 * bmc
-                upd = torch.stack([gmx, gmy, ga, gb, gc, g5], -1) * valid[..., None]
-                g_geom.index_add_(0, e.reshape(-1), upd.reshape(-1, 6))
+                upd = torch.empty(Ta, L, K, dtype=dtype, device=dev)
+                upd[..., 0] = g3 * a + g4 * b - g5 * amb
+                upd[..., 1] = g3 * b + g4 * c - g5 * bmc
+                upd[..., 2] = -0.5 * g0 + g3 * mx - 0.5 * g5 * mx * mx
+                upd[..., 3] = -g2 + g3 * my + g4 * mx - g5 * mx * my
+                upd[..., 4] = -0.5 * g1 + g4 * my - 0.5 * g5 * my * my
+                upd[..., 5] = g5
+                upd[..., 6:] = g_col
+                upd.mul_(valid[..., None])
+                g_rows.index_add_(0, e, upd.view(Ta * L, K))
                 T = nT[:, :, -1]
                 consumed += L
                 keep = plan.counts[tiles_h] > consumed
-                if early:
-                    keep &= (T > 0).any(1).numpy()
+                if on_cpu:
+                    keep &= (T > 0).any(0).numpy()
                 if not keep.all():
                     kept = torch.as_tensor(np.nonzero(keep)[0], device=dev)
-                    tiles_h, center, T, gt, rest0 = tiles_h[keep], center[kept], T[kept], gt[kept], rest0[kept]
-        g_means2d = g_geom[:, 0:2]
-        g_conics = g_geom[:, 2:5]
-        g_opac = g_geom[:, 5] / o_safe  # dL/dlog_o -> dL/do
-        g_colors = g_col[:, :D]
-        return g_means2d, g_conics, g_opac, g_colors, None, None, None, None, None, None, None
+                    tiles_h = tiles_h[keep]
+                    center, gt = center[kept], gt[kept]
+                    T, rest0 = T.index_select(1, kept), rest0.index_select(1, kept)
+        o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
+        return (g_rows[:, 0:2], g_rows[:, 2:5], g_rows[:, 5] / o_safe, g_rows[:, 6:6 + D],
+                None, None, None, None, None, None, None)
 
 
 def rasterize_to_pixels(
@@ -341,7 +381,7 @@ def rasterize_to_pixels(
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     vis, ent, counts = isect_tiles(means2d, radii, depths, tile_size, TW, TH)
     dtype = means2d.dtype
-    sel = lambda t, k: t.reshape(C * N, k)[vis]  # noqa: E731  visible rows, autograd-tracked gather
+    sel = lambda t, k: t.reshape(C * N, k).index_select(0, vis)  # noqa: E731  visible rows (autograd-tracked)
     acc = _RasterizeFn.apply(sel(means2d, 2), sel(conics, 3), sel(opacities, 1)[:, 0], sel(colors.to(dtype), D),
                              ent, counts, C, height, width, tile_size, chunk_elems)
     return acc[..., :D], acc[..., D:]
