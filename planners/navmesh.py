@@ -206,6 +206,20 @@ class NavMesh:
         self.vispolys = VisPolys.from_arrays(self._t["node_xy"], torch.from_numpy(ok),
                                              torch.from_numpy(self.vp_keys.astype(np.float64)),
                                              torch.from_numpy(self.vp_hits.astype(np.float64).reshape(-1, 2)))
+        # per-triangle plane z = c0 x + c1 y + c2 through the corner heights (cheap surface_z)
+        if T:
+            A = np.concatenate([a, np.ones((T, 3, 1))], axis=2)  # [T,3,3]
+            det_ok = np.abs(np.linalg.det(A)) > 1e-12
+            A[~det_ok] = np.eye(3)
+            zc = self.verts_z[self.tris]
+            coef = np.linalg.solve(A, zc[..., None])[..., 0]
+            coef[~det_ok] = np.stack([np.zeros((~det_ok).sum()), np.zeros((~det_ok).sum()),
+                                      zc[~det_ok].mean(1)], 1)
+        else:
+            coef = np.zeros((0, 3))
+        self._t["tri_plane"] = torch.from_numpy(coef)
+        self._t["node_z"] = (self.surface_z(self._t["node_tri"], self._t["node_xy"]) if len(self.node_xy)
+                             else torch.zeros(0, dtype=torch.float64))
         self.R_t = torch.from_numpy(self.nav_from_scene)
         self.bmin_t = torch.from_numpy(self.bmin.astype(np.float64))
 
@@ -286,27 +300,19 @@ class NavMesh:
         j = torch.searchsorted(rs, key).clamp(max=max(len(rs) - 1, 0))
         hit = rs[j] == key
         span = t["rc_order"][j]
-        zc = t["span_floor"][span].double() * self.ch
-        # plane through the triangle's corner heights
-        P = t["tri_xy"][tri]
-        Z = t["tri_z"][tri]
-        a, b, c = P[:, 0], P[:, 1], P[:, 2]
-        v0, v1, v2 = b - a, c - a, xy - a
-        den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
-        den = torch.where(den.abs() < 1e-30, torch.full_like(den, 1e-30), den)
-        l1 = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / den
-        l2 = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / den
-        zp = Z[:, 0] + l1 * (Z[:, 1] - Z[:, 0]) + l2 * (Z[:, 2] - Z[:, 0])
+        zc = t["span_floor"][span] * self.ch
+        c = t["tri_plane"][tri]
+        zp = c[:, 0] * xy[:, 0] + c[:, 1] * xy[:, 1] + c[:, 2]
         return torch.where(hit, zc, zp)
 
-    def _locate_local(self, p: torch.Tensor, vertical_tolerance: float):
+    def _locate_local(self, p: torch.Tensor, vertical_tolerance: float, return_z: bool = False):
         """Triangle `[B]` (-1 if none) containing local points p[B,3] in 2D whose floor is within
         `vertical_tolerance` of the point's height (the nearest level in height wins)."""
         t = self._t
         B = p.shape[0]
         out = torch.full((B,), -1, dtype=torch.long)
         if B == 0 or len(self.tris) == 0:
-            return out
+            return (out, p[:, 2].clone()) if return_z else out
         ix = torch.floor(p[:, 0] / self.cs).long()
         iy = torch.floor(p[:, 1] / self.cs).long()
         ing = (ix >= 0) & (iy >= 0) & (ix < self.width) & (iy < self.height)
@@ -319,9 +325,11 @@ class NavMesh:
         inside = point_in_tri(t["tri_xy"], candc, xy) & (cand >= 0)
         z = self.surface_z(candc.reshape(-1), xy.reshape(-1, 2)).reshape(B, K)
         dz = torch.where(inside, (p[:, 2:3] - z).abs(), torch.full_like(z, float("inf")))
-        best = dz.argmin(1)
-        found = dz.gather(1, best[:, None])[:, 0] <= vertical_tolerance
-        return torch.where(found, candc.gather(1, best[:, None])[:, 0], out)
+        best = dz.argmin(1, keepdim=True)
+        found = dz.gather(1, best)[:, 0] <= vertical_tolerance
+        if return_z:
+            return torch.where(found, candc.gather(1, best)[:, 0], out), z.gather(1, best)[:, 0]
+        return torch.where(found, candc.gather(1, best)[:, 0], out)
 
     def _island_by_column(self, p: torch.Tensor) -> torch.Tensor:
         """Island `[B]` of local points from the raster: the span in their column nearest in height
@@ -347,7 +355,7 @@ class NavMesh:
         triangles for the closest point in 3D (horizontal offset and height above the floor)."""
         B = p.shape[0]
         tol = max(0.5, self.settings.agent_max_climb)
-        tri = self._locate_local(p, tol)
+        tri, z = self._locate_local(p, tol, return_z=True)
         xy = p[:, :2].clone()
         dist = torch.zeros(B, dtype=torch.float64)
         miss = torch.nonzero(tri < 0)[:, 0]
@@ -359,8 +367,8 @@ class NavMesh:
                 cp = closest_point_on_tris(txy, q[:, :2])  # [b,T,2]
                 T = txy.shape[0]
                 tt = torch.arange(T).expand(len(m), T)
-                z = self.surface_z(tt.reshape(-1), cp.reshape(-1, 2)).reshape(len(m), T)
-                d2 = ((cp - q[:, None, :2]) ** 2).sum(-1) + (q[:, None, 2] - z) ** 2
+                zt = self.surface_z(tt.reshape(-1), cp.reshape(-1, 2)).reshape(len(m), T)
+                d2 = ((cp - q[:, None, :2]) ** 2).sum(-1) + (q[:, None, 2] - zt) ** 2
                 j = d2.argmin(1)
                 tri[m] = j
                 # nudge 1e-6 m towards the centroid so the point is strictly inside (clean line-of-sight tests)
@@ -371,7 +379,8 @@ class NavMesh:
                 dist[m] = d2[torch.arange(len(m)), j].sqrt()
         elif len(miss):
             dist[miss] = float("inf")
-        z = self.surface_z(tri.clamp_min(0), xy) if len(self.tris) else p[:, 2]
+        if len(miss) and len(self.tris):
+            z[miss] = self.surface_z(tri[miss], xy[miss])
         if max_distance is not None:
             bad = dist > max_distance
             if bad.any():

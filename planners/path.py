@@ -115,8 +115,8 @@ def find_path(nm, start, goal, max_distance: float | None = None):
     g = np.asarray(goal, dtype=np.float64).reshape(-1)
     if s.shape != (3,) or g.shape != (3,):
         raise ValueError(f"find_path: start and goal must be [3], got {s.shape} and {g.shape}")
-    s_tri, s_xy, s_z = _located(nm, s[None], "find_path start", max_distance)
-    g_tri, g_xy, g_z = _located(nm, g[None], "find_path goal", max_distance)
+    tri, xy, z = _located(nm, np.stack([s, g]), "find_path start/goal", max_distance)
+    s_tri, s_xy, s_z, g_tri, g_xy, g_z = tri[:1], xy[:1], z[:1], tri[1:], xy[1:], z[1:]
     dist, a, b = solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes=True)
     d = float(dist[0])
     if not np.isfinite(d):
@@ -130,7 +130,7 @@ def find_path(nm, start, goal, max_distance: float | None = None):
         chain.reverse()
         nodes = torch.tensor(chain, dtype=torch.long)
         nxy = nm._t["node_xy"][nodes]
-        nz = nm.surface_z(nm._t["node_tri"][nodes], nxy)
+        nz = nm._t["node_z"][nodes]
         pts.extend(torch.cat([nxy, nz[:, None]], 1))
     pts.append(torch.cat([g_xy[0], g_z]))
     local = torch.stack(pts)
