@@ -168,7 +168,7 @@ class EndpointSampler:
 
     def sample(self, num: int, rng: np.random.Generator, progress=None) -> SampledPairs:
         """Accept up to `num` pairs; stops early after `max_rounds` rounds (see `rejections`)."""
-        s, K = self.s, self.s.batch_size
+        s = self.s
         rej: Counter = Counter({r: 0 for r in REJECTION_REASONS})
         acc_s, acc_g, acc_geo, acc_euc, acc_isl, acc_rad, acc_path = [], [], [], [], [], [], []
         acc_s_nav = np.zeros((0, 3))
@@ -176,12 +176,16 @@ class EndpointSampler:
         drawn = rounds = 0
         while len(acc_s) < num and rounds < s.max_rounds:
             rounds += 1
+            # a round costs one batched planner call over its pairs: draw fewer near the end
+            K = min(s.batch_size, max(32, 16 * (num - len(acc_s))))
             drawn += K
             pts, on = self.draw_points(2 * K, rng)  # [2K, 3], [2K]
             keep_u = rng.random(K)  # drawn every round so the stream does not depend on filters
             pick_u = rng.random(K)
             near = self.near_camera(pts) & on
-            isl = np.asarray(self.navmesh.island_of(pts, max_distance=0.05)).astype(np.int64)  # [2K]
+            isl = np.full(2 * K, -1, dtype=np.int64)  # [2K]; off-mesh draws never reach the planner
+            if on.any():
+                isl[on] = np.asarray(self.navmesh.island_of(pts[on], max_distance=0.05)).astype(np.int64)
             st, isl_s, m = pts[:K], isl[:K], near[:K] & (isl[:K] >= 0)
             rej["off_mesh"] += int((~on[:K]).sum())
             # pair every start with a random goal from the second half ON ITS ISLAND (scenes split into
@@ -202,9 +206,16 @@ class EndpointSampler:
             idx = np.flatnonzero(m)
             if idx.size == 0:
                 continue
+            # geodesic >= euclidean: pairs already too far apart in a straight line skip the planner
+            euc = np.linalg.norm(go - st, axis=-1)
+            far = m & (euc > s.max_geodesic)
+            rej["too_long"] += int(far.sum())
+            m &= ~far
+            idx = np.flatnonzero(m)
             geo = np.full(K, np.inf)
-            geo[idx] = torch.as_tensor(
-                self.navmesh.geodesic_distance(st[idx], go[idx])).double().cpu().numpy()
+            if idx.size:
+                geo[idx] = torch.as_tensor(
+                    self.navmesh.geodesic_distance(st[idx], go[idx])).double().cpu().numpy()
             fin = np.isfinite(geo)
             rej["unreachable"] += int((m & ~fin).sum())
             m &= fin
@@ -214,7 +225,6 @@ class EndpointSampler:
             long_ = m & (geo > s.max_geodesic)
             rej["too_long"] += int(long_.sum())
             m &= ~long_
-            euc = np.linalg.norm(go - st, axis=-1)
             ratio = geo / np.maximum(euc, 1e-6)
             straight = m & (ratio < s.min_ratio) & (keep_u >= s.straight_keep_prob)
             rej["too_straight"] += int(straight.sum())
