@@ -92,7 +92,7 @@ def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: in
     """One process (`Collector`) or `num_workers` synchronous processes (`MultiSyncCollector`)."""
     if num_workers <= 1:
         c = Collector(env_fn, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
-                      split_trajs=False)
+                      split_trajs=False, auto_register_policy_transforms=False)  # stateless policy: no InitTracker
     else:
         c = MultiSyncCollector([env_fn] * num_workers, actor, frames_per_batch=frames_per_batch,
                                total_frames=total_frames, split_trajs=False)

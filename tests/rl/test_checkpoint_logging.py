@@ -1,0 +1,62 @@
+"""Atomic checkpoints with clear errors, the CSV logger, and the comparison table."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from policies import make_policy
+from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights, save_checkpoint
+from wanderland_nav.rl.loggers import ConsoleCSVLogger, Logger, make_logger
+from wanderland_nav.rl.report import comparison_table, relative_change
+
+
+def test_checkpoint_round_trip_and_errors(tmp_path):
+    p = make_policy("cnn", image_size=(16, 16), feature_dim=16)
+    opt = torch.optim.Adam(p.parameters())
+    path = save_checkpoint(tmp_path / "c.pt", policy=p, optimizer=opt, counters={"ppo_frames": 7},
+                           config={"a": 1}, phase="ppo")
+    ck = load_checkpoint(path)
+    assert ck["counters"] == {"ppo_frames": 7} and ck["phase"] == "ppo" and "waypoint_spacing" in ck["policy"]
+    assert [f.name for f in tmp_path.iterdir()] == ["c.pt"]
+    q = make_policy("cnn", image_size=(16, 16), feature_dim=16)
+    load_policy_weights(q, path)
+    with pytest.raises(KeyError, match="c.pt"):
+        load_policy_weights(make_policy("mbra", dim=16, depth=1, heads=2), path)
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(Exception):
+        load_checkpoint(tmp_path / "junk.pt")
+    torch.save({"foo": 1}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match="other.pt"):
+        load_checkpoint(tmp_path / "other.pt")
+    with pytest.raises(FileNotFoundError, match="missing.pt"):
+        load_checkpoint(tmp_path / "missing.pt")
+
+
+def test_csv_logger_writes_and_resumes(tmp_path):
+    lg = make_logger("console", tmp_path, console=False)
+    assert isinstance(lg, Logger)
+    lg.log_scalars({"train/SR": 0.5, "losses/x": float("nan")}, 10)
+    lg.close()
+    text = (tmp_path / "metrics.csv").read_text().splitlines()
+    assert text == ["step,key,value", "10,train/SR,0.5"]
+    lg2 = ConsoleCSVLogger(tmp_path, console=False)
+    lg2.log_scalars({"train/SR": 0.75}, 20)
+    assert (tmp_path / "metrics.csv").read_text().splitlines()[1:] == ["10,train/SR,0.5", "20,train/SR,0.75"]
+    with pytest.raises(ValueError, match="unknown logger"):
+        make_logger("wandb", tmp_path)
+
+
+def test_relative_change_signs():
+    assert relative_change(0.6, 0.4, "SR") == pytest.approx(0.5)
+    assert relative_change(2.0, 4.0, "NE") == pytest.approx(0.5)     # lower NE is better
+    assert math.isnan(relative_change(0.3, 0.0, "SR"))
+    table = comparison_table({"untrained": {"episodes": 4, "NE": 4.0, "SR": 0.25, "SPL": 0.2, "IR": 0.5},
+                              "BC": {"episodes": 4, "NE": 2.0, "SR": 0.5, "SPL": 0.4, "IR": 0.25}}, "untrained")
+    lines = table.splitlines()
+    assert lines[0].split() == ["policy", "episodes", "NE", "SR", "SPL", "IR"]
+    assert "(+50%)" in lines[2] and "(+100%)" in lines[2]
+    with pytest.raises(KeyError, match="nope"):
+        comparison_table({"a": {}}, "nope")
