@@ -146,7 +146,7 @@ def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int) 
 
 
 def unseen_top_faces(verts_nav: np.ndarray, faces: np.ndarray, centers_nav: np.ndarray, above: float,
-                     min_normal_z: float = 0.5, chunk: int = 1_000_000) -> np.ndarray:
+                     min_normal_z: float = 0.5, chunk: int = 250_000) -> np.ndarray:
     """`bool [F]`: faces pointing up (nav normal z > `min_normal_z`) whose centre lies more than
     `above` metres over the nearest (xy) capture position. A LiDAR carried along the trajectory
     cannot have seen such a top: it is the closing side of a ceiling/roof/canopy slab."""
