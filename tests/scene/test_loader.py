@@ -9,7 +9,6 @@ import struct
 import numpy as np
 import pytest
 
-from wanderland_nav.geometry import nav_from_scene_rotation
 from wanderland_nav.scene import Scene, SceneFormatError, load_scene
 from wanderland_nav.scene import colmap as C
 from wanderland_nav.scene.pointcloud import write_ply_points
