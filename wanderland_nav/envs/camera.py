@@ -62,7 +62,10 @@ class AgentCamera:
         H, W = self.cfg.height, self.cfg.width
         rgb = torch.empty(B, H, W, 3, dtype=torch.uint8, device=self.device)
         depth = torch.empty(B, H, W, 1, dtype=torch.float32, device=self.device) if self.cfg.depth else None
-        if B == 0:
+        if B == 0 or not self.cfg.enabled:
+            rgb.zero_()
+            if depth is not None:
+                depth.zero_()
             return rgb, depth
         viewmats = self.cam_from_world(position_nav, yaw)
         mode = "RGB+ED" if self.cfg.depth else "RGB"

@@ -22,6 +22,7 @@ GOAL_IMAGE_MODES = ("auto", "render", "none")
 class CameraConfig:
     """The agent's head camera. Height and pitch are relative to the feet and the heading."""
 
+    enabled: bool = True  # False: no rendering, RGB (and depth) are zeros; for privileged/blind agents
     width: int = 128  # pixels
     height: int = 128  # pixels
     hfov_deg: float = 90.0  # horizontal field of view (for fisheye: of the equidistant image circle)

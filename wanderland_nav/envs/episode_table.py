@@ -62,7 +62,7 @@ def build_episode_table(episodes: Sequence, scene, navmesh, *, instruction_lengt
         bad = np.flatnonzero(~np.isfinite(arr).all(-1))
         if bad.size:
             raise ValueError(f"{where}: episodes[{bad[0]}].{name}: not finite")
-    snapped = _np(navmesh.snap_point(starts))
+    snapped = _np(navmesh.snap_point(starts, max_distance=1e6))  # judged below, naming the episode
     off = np.linalg.norm(snapped - starts, axis=-1)
     far = np.flatnonzero(~(off <= MAX_START_SNAP))
     if far.size:

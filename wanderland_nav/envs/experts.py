@@ -76,7 +76,33 @@ class ExpertPolicy(TensorDictModuleBase):
         p = ref @ R.T
         p = np.concatenate([start[None], p[1:] if np.linalg.norm(p[0] - start) < 1.0 else p, goal[None]])
         keep = np.concatenate([[True], np.linalg.norm(np.diff(p, axis=0), axis=-1) > 1e-6])
-        return p[keep]
+        return ExpertPolicy._ease_corners(env, p[keep])
+
+    @staticmethod
+    def _ease_corners(env, p: np.ndarray, offsets=(0.3, 0.2, 0.1)) -> np.ndarray:
+        """Move each interior corner of a shortest path `[P, 3]` (nav) away from the obstacle it wraps.
+
+        Why: a navmesh shortest path touches the walkable boundary at every corner, so a body that
+        drifts a few centimetres to the wrong side of a corner meets the wall and cannot enter a
+        narrow passage. The obstacle lies inside the turn; the corner moves by the largest of
+        `offsets` (metres) along the outward bisector that stays on the navmesh.
+        """
+        if len(p) < 3:
+            return p
+        d = np.diff(p[:, :2], axis=0)
+        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
+        out = d[:-1] - d[1:]  # [P-2, 2] points away from the inside of each turn
+        n = np.linalg.norm(out, axis=-1, keepdims=True)
+        out = np.where(n > 1e-3, out / np.maximum(n, 1e-9), 0.0)
+        cand = p[1:-1, None, :].repeat(len(offsets), 1).copy()  # [P-2, O, 3]
+        cand[..., :2] += out[:, None, :] * np.asarray(offsets)[None, :, None]
+        ok = env._navigable(torch.as_tensor(cand.reshape(-1, 3), dtype=torch.float32)).cpu().numpy()
+        ok = ok.reshape(len(p) - 2, len(offsets))
+        first = np.where(ok.any(1), ok.argmax(1), -1)
+        q = p.copy()
+        sel = first >= 0
+        q[1:-1][sel] = cand[sel, first[sel]]
+        return q
 
     def reset(self) -> None:
         self._progress = None

@@ -52,6 +52,8 @@ class NavEnv(EnvBase):
         navmesh, gaussians, renderer: already-loaded parts, to share them between envs or to test
             with stand-ins; by default loaded from the scene folder / `wanderland_nav.render.render`.
         seed: seeds the episode sampler (also `set_seed`).
+        asset_roots: folders that episodes' relative `goal_image` paths may be relative to (tried
+            first; then the scene's episodes.json folder and the scene root).
     """
 
     batch_locked = True
@@ -68,6 +70,7 @@ class NavEnv(EnvBase):
         gaussians=None,
         renderer: Renderer | None = None,
         seed: int = 0,
+        asset_roots: Sequence[str | Path] = (),
     ):
         batch_size = torch.Size(batch_size)
         if len(batch_size) != 1 or batch_size[0] < 1:
@@ -79,7 +82,7 @@ class NavEnv(EnvBase):
         self.episodes = list(episodes)
         where = f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
         self.navmesh = navmesh if navmesh is not None else _load_navmesh(scene)
-        if renderer is None or gaussians is None:
+        if self.config.camera.enabled and (renderer is None or gaussians is None):
             gaussians, renderer = _load_renderer(scene, gaussians, renderer, self.device)
         self._R_ns = torch.as_tensor(np.asarray(scene.nav_from_scene), dtype=torch.float32)  # nav_from_scene [3, 3]
         cfg = self.config
@@ -88,7 +91,7 @@ class NavEnv(EnvBase):
         ).to(self.device)
         self.field = self.navmesh.distance_field(self.table.field_goals_scene)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
-        self._init_goal_images(where)
+        self._init_goal_images(where, [Path(p) for p in asset_roots])
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
         all_eps = torch.arange(len(self.table), device=self.device)
@@ -105,17 +108,15 @@ class NavEnv(EnvBase):
 
     # ------------------------------------------------------------------ construction
 
-    def _init_goal_images(self, where: str) -> None:
+    def _init_goal_images(self, where: str, roots: list[Path]) -> None:
         c, mode = self.config.camera, self.config.goal_image
         E = len(self.table)
         if mode == "render":
             imgs, _ = self.camera.render(self.table.goal_position, self.table.goal_yaw)
             has = torch.ones(E, dtype=torch.bool, device=self.device)
         elif mode == "auto":
-            roots = [Path(p) for p in (getattr(self.scene, "root", None),) if p is not None]
             ep_path = getattr(self.scene, "episodes_path", None)
-            if ep_path is not None:
-                roots.insert(0, Path(ep_path).parent)
+            roots = roots + [Path(p) for p in (ep_path and Path(ep_path).parent, getattr(self.scene, "root", None)) if p]
             imgs, has = load_goal_images(self.episodes, roots, c.height, c.width, where=where)
         else:
             imgs = torch.zeros(E, c.height, c.width, 3, dtype=torch.uint8)
@@ -129,7 +130,8 @@ class NavEnv(EnvBase):
         f32 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.float32, device=dev)  # noqa: E731
         i64 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.int64, device=dev)  # noqa: E731
         flag = lambda: Categorical(2, shape=(*B, 1), dtype=torch.bool, device=dev)  # noqa: E731
-        img = lambda *s: Bounded(0, 255, shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
+        # uint8 images as Unbounded: a Bounded spec would hold full-size low/high tensors (B*T*H*W*3 each)
+        img = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
         obs = {
             keys.RGB: img(T, H, W, 3),
             keys.PAST_POSITIONS: f32(T, 2),
@@ -137,7 +139,7 @@ class NavEnv(EnvBase):
             keys.GOAL_POSE: f32(4),
             keys.GOAL_IMAGE: img(H, W, 3),
             keys.HAS_GOAL_IMAGE: flag(),
-            keys.INSTRUCTION_TOKENS: Bounded(0, 256, shape=(*B, L), dtype=torch.int64, device=dev),
+            keys.INSTRUCTION_TOKENS: i64(L),
             keys.EPISODE_INDEX: i64(1),
             keys.STEP_COUNT: i64(1),
             keys.AGENT_POSITION: f32(3),
@@ -175,6 +177,9 @@ class NavEnv(EnvBase):
         self._progress = ProgressState(z(), z(dtype=torch.long), z(dtype=torch.long))
         self._path_len, self._collisions = z(), z(dtype=torch.long)
         self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
+        self._agent_goal_image = z(H, W, 3, dtype=torch.uint8)
+        self._agent_has_goal_image = z(1, dtype=torch.bool)
+        self._agent_tokens = z(self.config.instruction_length, dtype=torch.long)
         self._started = False
 
     # ------------------------------------------------------------------ TorchRL API
@@ -284,6 +289,9 @@ class NavEnv(EnvBase):
         self._progress = ProgressState(put(p.best_distance, d0), put(p.steps_without_progress, zl), put(p.stuck_steps, zl))
         self._path_len, self._collisions = put(self._path_len, zl.float()), put(self._collisions, zl)
         self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
+        self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
+        self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
+        self._agent_tokens = put(self._agent_tokens, self.table.instruction_tokens[ep])
 
     def _record_finished(self, idx, success, intervention, truncated) -> None:
         """Stash the metrics of the agents `idx` whose episode just ended (tensors; converted lazily)."""
@@ -336,9 +344,10 @@ class NavEnv(EnvBase):
     # ------------------------------------------------------------------ observations
 
     def _push_frame(self, rgb: torch.Tensor, depth: torch.Tensor | None, pos: torch.Tensor) -> None:
-        self._rgb = torch.cat([self._rgb[:, 1:], rgb.unsqueeze(1)], 1)
-        if self._depth is not None:
-            self._depth = torch.cat([self._depth[:, 1:], depth.unsqueeze(1)], 1)
+        if self.config.camera.enabled:  # disabled: the history stays all zeros, nothing to shift
+            self._rgb = torch.cat([self._rgb[:, 1:], rgb.unsqueeze(1)], 1)
+            if self._depth is not None:
+                self._depth = torch.cat([self._depth[:, 1:], depth.unsqueeze(1)], 1)
         self._pos_hist = torch.cat([self._pos_hist[:, 1:], pos.unsqueeze(1)], 1)
 
     def _observation(self) -> TensorDict:
@@ -353,9 +362,9 @@ class NavEnv(EnvBase):
             keys.PAST_POSITIONS: past,
             keys.GOAL_VECTOR: goal,
             keys.GOAL_POSE: torch.cat([goal, torch.cos(dyaw)[:, None], torch.sin(dyaw)[:, None]], -1),
-            keys.GOAL_IMAGE: self._goal_images[ep],
-            keys.HAS_GOAL_IMAGE: self._has_goal_image[ep].unsqueeze(-1),
-            keys.INSTRUCTION_TOKENS: self.table.instruction_tokens[ep],
+            keys.GOAL_IMAGE: self._agent_goal_image,  # per-agent copies, replaced at reset only
+            keys.HAS_GOAL_IMAGE: self._agent_has_goal_image,
+            keys.INSTRUCTION_TOKENS: self._agent_tokens,
             keys.EPISODE_INDEX: ep.unsqueeze(-1),
             keys.STEP_COUNT: self._steps.unsqueeze(-1),
             keys.AGENT_POSITION: self._pos,

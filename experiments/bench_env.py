@@ -1,0 +1,95 @@
+"""Benchmark NavEnv: environment frames per second and where a step's time goes.
+
+    python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
+                                    [--device cpu|cuda] [--threads 2]
+
+For every (resolution, B) it builds a NavEnv on the demo scene (built and prepared on first use,
+episodes generated if missing), drives it with the expert policy through `step_and_maybe_reset`
+(so episode ends and their re-renders are included), and prints frames/s (agent-steps per second of
+env time, policy excluded) with the share of env time spent in the renderer, in navmesh motion, in
+rules (distance field, rewards, terminations), in observation assembly and in TorchRL's own step
+bookkeeping. A last row per B runs with the camera disabled: the env's cost without rendering.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import torch
+
+
+def prepare(preset: str, root: Path, num_episodes: int):
+    from planners import NavMesh
+    from wanderland_nav.episodes.generate import write_scene_episodes
+    from wanderland_nav.pipeline import ensure_demo_scene
+    from wanderland_nav.render import Gaussians
+    from wanderland_nav.scene import load_scene
+
+    scene = ensure_demo_scene(root / preset, seed=0, preset=preset)
+    navmesh = NavMesh.load(scene.navmesh_path)
+    episodes = Path(scene.root) / "episodes.json"
+    if not episodes.is_file():
+        write_scene_episodes(scene, navmesh, episodes, num_episodes=num_episodes, seed=0)
+        scene = load_scene(scene.root)
+    return scene, navmesh, Gaussians.load(scene.gaussians_path)
+
+
+def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True):
+    from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
+    from wanderland_nav.envs.factory import make_nav_env
+
+    cfg = NavEnvConfig()
+    cfg.camera.width = cfg.camera.height = res
+    cfg.camera.enabled = enabled
+    env = make_nav_env(scene, config=cfg, batch_size=B, device=device, navmesh=navmesh,
+                       gaussians=gaussians.to(device), seed=0)
+    policy = ExpertPolicy(env)
+    td = env.reset()
+    td = policy(td)
+    _, td = env.step_and_maybe_reset(td)  # warm-up (allocations, first-call costs)
+    env.timings.clear()
+    env_time = 0.0
+    for _ in range(steps):
+        td = policy(td)
+        t0 = time.perf_counter()
+        _, td = env.step_and_maybe_reset(td)
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        env_time += time.perf_counter() - t0
+    tm = env.timings
+    render = tm["render"] + tm["reset_render"]
+    share = lambda x: 100.0 * x / env_time  # noqa: E731
+    return {
+        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "ms/step": 1e3 * env_time / steps,
+        "render%": share(render), "motion%": share(tm["physics"]), "rules%": share(tm["rules"]),
+        "obs%": share(tm["observation"]), "torchrl%": share(env_time - tm["step"] - tm["reset_render"]),
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="default", choices=["tiny", "default"])
+    ap.add_argument("--root", type=Path, default=Path("data/scenes/bench"))
+    ap.add_argument("--batch", type=int, nargs="+", default=[1, 16, 64])
+    ap.add_argument("--res", type=int, nargs="+", default=[64, 128])
+    ap.add_argument("--steps", type=int, default=3)
+    ap.add_argument("--episodes", type=int, default=60)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes)
+    print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
+          f"{args.steps} timed steps after 1 warm-up")
+    cols = ["B", "res", "fps", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+    print("  ".join(f"{c:>9}" for c in cols), flush=True)
+    for B in args.batch:
+        for res in args.res + [None]:
+            r = bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device, enabled=res is not None)
+            print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols), flush=True)
+
+
+if __name__ == "__main__":
+    main()
