@@ -82,6 +82,7 @@ class GenerationSummary:
     splits: dict[str, int]
     seconds: float = 0.0
     skipped: bool = False  # True when a rerun found an up-to-date file
+    out: str | None = None  # the episodes file, when one was written (or found up to date)
 
     @property
     def episodes_per_second(self) -> float:
@@ -98,11 +99,11 @@ class GenerationSummary:
         hist = " ".join(f"[{k}]:{v}" for k, v in self.length_hist.items() if v)
         head = f"{self.scene}: kept {self.kept}/{self.requested}"
         if self.skipped:
-            return head + " (up to date, nothing regenerated)"
+            return head + f" (up to date, nothing regenerated: {self.out})"
         lines = [f"{head} from {self.candidates} candidate pairs in {self.seconds:.1f}s "
                  f"({self.episodes_per_second:.1f} episodes/s)",
                  f"  rejected: {rej}", f"  geodesic length histogram (m): {hist}",
-                 f"  splits: {self.splits}"]
+                 f"  splits: {self.splits}"] + ([f"  wrote {self.out}"] if self.out else [])
         if self.kept < self.requested:
             lines.append(f"  WARNING: only {self.kept} of {self.requested} episodes found; loosen the sampler "
                          "settings (camera_radius, min/max_geodesic, min_separation) or ask for fewer")
@@ -299,7 +300,7 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
             return existing, GenerationSummary(
                 scene=scene.name, requested=num_episodes, kept=len(existing), candidates=0, rounds=0,
                 rejections={}, length_hist=length_histogram([e.geodesic_distance for e in existing]),
-                splits=split_counts, skipped=True)
+                splits=split_counts, skipped=True, out=str(out))
     episodes, summary = generate_episodes(
         scene, navmesh, num_episodes=num_episodes, seed=seed, settings=settings, instructions=instructions,
         goal_image_dir=out.parent / "goal_images", progress=progress)
@@ -310,4 +311,5 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
         "summary": summary.to_dict(),
     }
     save_episodes(out, episodes, extras)
+    summary.out = str(out)
     return episodes, summary

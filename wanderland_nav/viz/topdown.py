@@ -68,7 +68,11 @@ def plot_topdown(out_path: str | Path, *, nav_from_scene: np.ndarray, camera_cen
                 pts = np.asarray(navmesh.random_navigable_points(20000, seed=seed), dtype=np.float64) @ R_ns.T
                 ax.scatter(pts[:, 0], pts[:, 1], s=2.0, c="0.8", marker=".", linewidths=0, label="navmesh")
         if len(cams):
-            ax.plot(cams[:, 0], cams[:, 1], "-", color="tab:blue", lw=1.0, alpha=0.8, label="capture cameras")
+            # capture order, broken where consecutive cameras jump (separate drives / stereo sides)
+            step = np.linalg.norm(np.diff(cams[:, :2], axis=0), axis=-1)
+            gap = np.flatnonzero(step > max(3.0 * float(np.median(step)) if len(step) else 0.0, 2.0))
+            line = np.insert(cams[:, :2], gap + 1, np.nan, axis=0)
+            ax.plot(line[:, 0], line[:, 1], "-", color="tab:blue", lw=1.0, alpha=0.8, label="capture cameras")
             ax.scatter(cams[:, 0], cams[:, 1], s=4, color="tab:blue")
         eps = list(episodes)
         if len(eps) > max_paths:
