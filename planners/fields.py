@@ -58,20 +58,27 @@ class GeodesicField:
         loc = nm.to_local(p.reshape(-1, 3).double())
         if gi.shape[0] != loc.shape[0]:
             raise ValueError(f"GeodesicField.lookup: {loc.shape[0]} points but {gi.shape[0]} goal indices")
-        if self._all_simple:
-            d = self._lookup_simple(loc, gi)
-        else:
-            d = self._lookup_general(loc, gi)
+        d = self._lookup_simple(loc, gi)
+        general = ~self._goal_simple[gi]
+        if general.any():  # goals on islands with overlapping levels: triangle walks
+            d[general] = self._lookup_general(loc[general], gi[general])
         return d.to(out_dtype).reshape(p.shape[:-1])
 
     @property
-    def _all_simple(self) -> bool:
-        if not hasattr(self, "_simple_cache"):
-            self._simple_cache = bool(self.nm.walls.simple.all()) and bool(self.nm.vispolys.ok.all())
-        return self._simple_cache
+    def _goal_simple(self) -> torch.Tensor:
+        """Per goal: its island is one 2D polygon with visibility polygons for all its corners."""
+        if not hasattr(self, "_goal_simple_cache"):
+            nm = self.nm
+            isl = self.goal_island.clamp_min(0)
+            ok = nm.walls.simple[isl] & (self.goal_island >= 0) & self.goal_vis.ok
+            node_isl = nm._t["node_island"]
+            for g in torch.nonzero(ok)[:, 0].tolist():
+                ok[g] = bool(nm.vispolys.ok[node_isl == isl[g]].all())
+            self._goal_simple_cache = ok
+        return self._goal_simple_cache
 
     def _lookup_simple(self, loc, gi):
-        """Fast path (every island one 2D polygon): ~50 tensor ops for any B, no Python loops."""
+        """Fast path for goals on single-level islands: ~60 tensor ops for any B, no Python loops."""
         nm = self.nm
         t = nm._t
         xy = loc[:, :2]

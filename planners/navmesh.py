@@ -177,6 +177,7 @@ class NavMesh:
         self.rc_order = np.argsort(self.rc_key, kind="stable")
         self.rc_sorted = self.rc_key[self.rc_order]
         self.col_tris = self._column_triangles()
+        self.col_island = self._column_islands()
         t = torch.from_numpy
         self._t = {
             "tri_xy": t(a.astype(np.float64)),
@@ -189,6 +190,7 @@ class NavMesh:
             "span_region": t(self.span_region.astype(np.int64)),
             "span_island": t(self.region_island[self.span_region].astype(np.int64)) if N else torch.zeros(0, dtype=torch.long),
             "col_tris": t(self.col_tris.astype(np.int64)),
+            "col_island": t(self.col_island),
             "rc_sorted": t(self.rc_sorted.astype(np.int64)),
             "rc_order": t(self.rc_order.astype(np.int64)),
             "node_xy": t(self.node_xy.astype(np.float64)),
@@ -256,6 +258,25 @@ class NavMesh:
         K = max(1, int(np.diff(start).max()))
         out = np.full((self.ncols, K), -1, np.int32)
         out[col, np.arange(len(col)) - start[col]] = t
+        return out
+
+    def _column_islands(self) -> np.ndarray:
+        """Per column `[ncols]`: the one island its spans and triangles belong to, -1 for none,
+        -2 when several levels of different islands share it (then heights decide)."""
+        cols = [self.span_col]
+        isls = [self.region_island[self.span_region]] if len(self.span_col) else [np.zeros(0, np.int64)]
+        c, k = np.nonzero(self.col_tris >= 0)
+        cols.append(c)
+        isls.append(self.tri_island[self.col_tris[c, k]] if len(c) else np.zeros(0, np.int64))
+        col = np.concatenate(cols).astype(np.int64)
+        isl = np.concatenate(isls).astype(np.int64)
+        pairs = np.unique(col * (int(isl.max(initial=0)) + 1) + isl) if len(col) else np.zeros(0, np.int64)
+        n_isl = int(isl.max(initial=0)) + 1
+        pc, pi = pairs // n_isl, pairs % n_isl
+        out = np.full(self.ncols, -1, np.int64)
+        cnt = np.bincount(pc, minlength=self.ncols)
+        out[pc] = pi
+        out[cnt > 1] = -2
         return out
 
     def _rc_lookup(self, region: np.ndarray, col: np.ndarray) -> np.ndarray:
@@ -332,13 +353,21 @@ class NavMesh:
         return torch.where(found, candc.gather(1, best)[:, 0], out)
 
     def _island_by_column(self, p: torch.Tensor) -> torch.Tensor:
-        """Island `[B]` of local points from the raster: the span in their column nearest in height
-        (-1 outside every span column). Cheaper than triangle location; used by field lookups."""
+        """Island `[B]` of local points from the raster: the column's only island, else the span in
+        the column nearest in height (-1 where neither answers). Cheaper than triangle location."""
         t = self._t
         ix = torch.floor(p[:, 0] / self.cs).long()
         iy = torch.floor(p[:, 1] / self.cs).long()
         ing = (ix >= 0) & (iy >= 0) & (ix < self.width) & (iy < self.height)
         col = torch.where(ing, ix + iy * self.width, 0)
+        isl = torch.where(ing, t["col_island"][col], -1)
+        amb = isl == -2
+        if amb.any():
+            isl[amb] = self._island_by_height(p[amb], col[amb], ing[amb])
+        return isl
+
+    def _island_by_height(self, p, col, ing):
+        t = self._t
         st = t["col_start"][col]
         cnt = torch.where(ing, t["col_start"][col + 1] - st, 0)
         k = torch.arange(max(self.max_col_spans, 1))

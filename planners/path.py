@@ -81,8 +81,10 @@ def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 2
     M = D.shape[0]
     for c in range(0, len(rest), chunk):
         q = rest[c:c + chunk]
-        A = _visible_to_nodes(nm, s_xy[q], s_tri[q], isl_s[q])  # [q,M]
-        Bv = _visible_to_nodes(nm, g_xy[q], g_tri[q], isl_g[q])
+        # both ends in one batch: [2q,M] distances to the corners each end sees
+        AB = _visible_to_nodes(nm, torch.cat([s_xy[q], g_xy[q]]), torch.cat([s_tri[q], g_tri[q]]),
+                               torch.cat([isl_s[q], isl_g[q]]))
+        A, Bv = AB[:len(q)], AB[len(q):]
         if M == 0:
             continue
         va, ia = _compact(A)

@@ -172,6 +172,27 @@ class VisPolys:
         else:
             self.keys, self.hits = torch.zeros(0, dtype=torch.float64), torch.zeros((0, 2), dtype=torch.float64)
 
+    N_BINS = 512
+
+    def _first_at_least(self, src, th, key):
+        """Index of the first key >= `key` (== searchsorted), via a per-source angular bucket table
+        and a few vectorised forward steps: a global binary search over every corner's fan costs
+        ~17 cache misses per query, this ~4."""
+        if not hasattr(self, "_bucket"):
+            S = self.src_xy.shape[0]
+            edges = -torch.pi + 2 * torch.pi * torch.arange(self.N_BINS + 1, dtype=torch.float64) / self.N_BINS
+            q = (torch.arange(S, dtype=torch.float64)[:, None] * 32 + 16.0 + edges[None]).reshape(-1)
+            self._bucket = torch.searchsorted(self.keys, q).reshape(S, self.N_BINS + 1)
+        L = len(self.keys)
+        b = ((th + torch.pi) * (self.N_BINS / (2 * torch.pi))).long().clamp_(0, self.N_BINS - 1)
+        i = self._bucket[src, b]
+        for _ in range(3):
+            i = i + (self.keys[i.clamp(max=L - 1)] < key)
+        late = (self.keys[i.clamp(max=L - 1)] < key) & (i < L)
+        if late.any():
+            i[late] = torch.searchsorted(self.keys, key[late])
+        return i
+
     @classmethod
     def from_arrays(cls, src_xy, ok, keys, hits) -> "VisPolys":
         self = cls.__new__(cls)
@@ -183,14 +204,15 @@ class VisPolys:
 
         The fan triangle (source, h0, h1) bracketing p's angle is counter-clockwise, so p is
         visible iff it lies left of h0 -> h1 (within 1e-9 m)."""
-        if p.shape[0] == 0:
-            return torch.zeros(0, dtype=torch.bool)
+        if p.shape[0] == 0 or len(self.keys) < 2:
+            return torch.zeros(p.shape[0], dtype=torch.bool)
         if not hasattr(self, "_hx"):
             self._hx, self._hy = self.hits[:, 0].contiguous(), self.hits[:, 1].contiguous()
             self._sx, self._sy = self.src_xy[:, 0].contiguous(), self.src_xy[:, 1].contiguous()
         px, py = p[:, 0], p[:, 1]
         th = torch.atan2(py - self._sy[src], px - self._sx[src])
-        i1 = torch.searchsorted(self.keys, src * 32 + 16.0 + th).clamp_(1, len(self.keys) - 1)
+        key = src * 32 + 16.0 + th
+        i1 = self._first_at_least(src, th, key).clamp_(1, len(self.keys) - 1)
         i0 = i1 - 1
         x0, y0 = self._hx[i0], self._hy[i0]
         ex, ey = self._hx[i1] - x0, self._hy[i1] - y0
