@@ -1,0 +1,408 @@
+"""A compact rollout file (`.npz`) and the recorder that fills it from a running `NavEnv`.
+
+Why a file of its own: researchers debug a policy by replaying what it did (`python -m
+wanderland_nav.replay rollout=<file>`), long after the run; the file keeps only what cannot be
+recomputed cheaply (poses, actions, rewards, predicted waypoints, episode ids, per-episode metrics)
+and, optionally, the frames. Frames left out are re-rendered from the splats on replay, since the
+agent camera is a pure function of the pose and the camera settings stored in `meta`.
+
+Layout (version `ROLLOUT_VERSION`), `T` recorded steps of `B` agents, all poses in the **nav frame**:
+
+| field | dtype, shape | meaning |
+|---|---|---|
+| `position` | f32 `[T, B, 3]` | agent feet where the action was chosen |
+| `yaw` | f32 `[T, B]` | heading (rad, CCW from +x) at that time |
+| `next_position`, `next_yaw` | f32 `[T, B, 3]`, `[T, B]` | pose after the step (before any auto-reset) |
+| `action` | f32 `[T, B, ...]` | `keys.ACTION` (`[K, 2]` waypoints or `[2]` (v, omega)) |
+| `waypoints` | f32 `[T, B, K, 2]` | the policy's predicted body-frame waypoints (= action in waypoint mode) |
+| `reward`, `distance_to_goal` | f32 `[T, B]` | step reward; geodesic distance after the step |
+| `done`, `success`, `collision` | bool `[T, B]` | episode ended at this step / ended in the goal / navmesh blocked the motion |
+| `episode_index`, `step_count` | i64 `[T, B]` | running episode (index into `episode_ids`); steps taken before this one |
+| `rgb` (optional) | u8 `[T, B, H, W, 3]` | the frame observed at `position` |
+| `depth` (optional) | f32 `[T, B, H, W, 1]` | z-depth for `rgb` |
+| `episode_ids` | str `[E]` | `episode_id` of each episode index |
+| `meta_json` | str | `RolloutMeta` (version, scene, up axis, camera, control period, metrics of finished episodes) |
+
+Writes are atomic (temporary file + rename); reading checks every field's presence, dtype family
+and shape and names the file and field in the error.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wanderland_nav import keys
+from wanderland_nav.atomic import atomic_path
+
+ROLLOUT_VERSION = 1
+
+
+class RolloutFormatError(ValueError):
+    """A rollout file is missing, truncated, of another version, or has a field of the wrong shape/type."""
+
+
+@dataclass
+class RolloutMeta:
+    """What replay needs besides the arrays: where the scene is and how the camera was set up."""
+
+    version: int = ROLLOUT_VERSION
+    scene_root: str | None = None
+    episodes_path: str | None = None
+    up_axis: str = "+z"
+    nav_from_scene: list[list[float]] = field(default_factory=lambda: np.eye(3).tolist())  # [3, 3]
+    control_period: float = 0.5  # seconds of simulated time per step (timeline `sim_time`)
+    camera: dict[str, Any] = field(default_factory=dict)  # CameraConfig fields (width, height, hfov_deg, ...)
+    K: list[list[float]] | None = None  # [3, 3] agent camera intrinsics
+    policy: str = "policy"
+    metrics: list[dict] = field(default_factory=list)  # EpisodeMetrics.to_dict() of finished episodes
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Rollout:
+    """Arrays of one recorded run (see the module docstring for shapes); `rgb`/`depth` may be None."""
+
+    position: np.ndarray
+    yaw: np.ndarray
+    next_position: np.ndarray
+    next_yaw: np.ndarray
+    action: np.ndarray
+    waypoints: np.ndarray
+    reward: np.ndarray
+    distance_to_goal: np.ndarray
+    done: np.ndarray
+    success: np.ndarray
+    collision: np.ndarray
+    episode_index: np.ndarray
+    step_count: np.ndarray
+    episode_ids: np.ndarray
+    meta: RolloutMeta
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+
+    @property
+    def num_steps(self) -> int:
+        return int(self.position.shape[0])
+
+    @property
+    def num_agents(self) -> int:
+        return int(self.position.shape[1])
+
+    def episode_segments(self) -> list[tuple[int, int, int, int]]:
+        """`(agent, episode_index, t_start, t_end)` per (possibly unfinished) episode, t_end exclusive.
+
+        An agent's episode starts at its first step or the step after a `done`; contiguous runs of
+        steps, so each segment's poses are one trajectory.
+        """
+        T, B = self.done.shape
+        out = []
+        for b in range(B):  # loop over agents and their episode boundaries only, not over steps
+            ends = np.nonzero(self.done[:, b])[0] + 1
+            starts = np.concatenate([[0], ends])
+            stops = np.concatenate([ends, [T]])
+            for s, e in zip(starts, stops):
+                if e > s:
+                    out.append((b, int(self.episode_index[s, b]), int(s), int(e)))
+        return out
+
+
+# field -> (dtype kind(s), number of dims, or None if free); T, B checked separately
+_FIELDS: dict[str, tuple[str, int | None]] = {
+    "position": ("f", 3), "yaw": ("f", 2), "next_position": ("f", 3), "next_yaw": ("f", 2),
+    "action": ("f", None), "waypoints": ("f", 4), "reward": ("f", 2), "distance_to_goal": ("f", 2),
+    "done": ("b", 2), "success": ("b", 2), "collision": ("b", 2), "episode_index": ("iu", 2),
+    "step_count": ("iu", 2),
+}
+_OPTIONAL = {"rgb": ("u", 5), "depth": ("f", 5)}
+
+
+def save_rollout(path: str | Path, rollout: Rollout, *, compress: bool = True) -> Path:
+    """Write `rollout` to `path` (`.npz`) atomically; returns the path."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise ValueError(f"{path}: rollout files end in .npz")
+    arrays: dict[str, np.ndarray] = {k: np.asarray(getattr(rollout, k)) for k in _FIELDS}
+    for k in _OPTIONAL:
+        v = getattr(rollout, k)
+        if v is not None:
+            arrays[k] = np.asarray(v)
+    arrays["episode_ids"] = np.asarray([str(e) for e in rollout.episode_ids], dtype=np.str_)
+    arrays["meta_json"] = np.asarray(json.dumps(asdict(rollout.meta)))
+    _check(arrays, str(path))  # never write a file that the reader would refuse
+    with atomic_path(path) as tmp:
+        (np.savez_compressed if compress else np.savez)(tmp, **arrays)
+    return path
+
+
+def load_rollout(path: str | Path) -> Rollout:
+    """Read and validate a rollout file. Raises `RolloutFormatError` naming the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise RolloutFormatError(f"{path}: no such rollout file")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        raise RolloutFormatError(f"{path}: not a readable rollout .npz (truncated or corrupt): {e}") from e
+    if "meta_json" not in arrays:
+        raise RolloutFormatError(f"{path}: field 'meta_json' missing (not a wanderland_nav rollout file)")
+    try:
+        meta_d = json.loads(str(arrays.pop("meta_json")))
+    except json.JSONDecodeError as e:
+        raise RolloutFormatError(f"{path}: field 'meta_json' is not valid JSON: {e}") from e
+    version = meta_d.get("version")
+    if version != ROLLOUT_VERSION:
+        raise RolloutFormatError(f"{path}: field 'meta_json.version' is {version!r}; this reader knows "
+                                 f"version {ROLLOUT_VERSION}")
+    known = {f for f in RolloutMeta.__dataclass_fields__}
+    meta = RolloutMeta(**{k: v for k, v in meta_d.items() if k in known})
+    _check(arrays, str(path))
+    return Rollout(**{k: arrays[k] for k in _FIELDS}, episode_ids=arrays["episode_ids"], meta=meta,
+                   rgb=arrays.get("rgb"), depth=arrays.get("depth"))
+
+
+def _check(arrays: dict[str, np.ndarray], where: str) -> None:
+    if "position" not in arrays:
+        raise RolloutFormatError(f"{where}: field 'position' missing")
+    TB = arrays["position"].shape[:2]
+    if arrays["position"].ndim != 3:
+        raise RolloutFormatError(f"{where}: field 'position' has shape {arrays['position'].shape}, expected [T, B, 3]")
+    for name, (kinds, ndim) in {**_FIELDS, **_OPTIONAL}.items():
+        if name not in arrays:
+            if name in _OPTIONAL:
+                continue
+            raise RolloutFormatError(f"{where}: field {name!r} missing")
+        a = arrays[name]
+        if a.dtype.kind not in kinds:
+            raise RolloutFormatError(f"{where}: field {name!r} has dtype {a.dtype}, expected kind {kinds!r}")
+        if (ndim is not None and a.ndim != ndim) or a.shape[:2] != TB:
+            raise RolloutFormatError(f"{where}: field {name!r} has shape {a.shape}, expected [T={TB[0]}, B={TB[1]}, ...]"
+                                     + (f" with {ndim} dims" if ndim else ""))
+    E = arrays["episode_ids"].shape[0] if "episode_ids" in arrays else None
+    if E is None:
+        raise RolloutFormatError(f"{where}: field 'episode_ids' missing")
+    ei = arrays["episode_index"]
+    if ei.size and (ei.min() < 0 or ei.max() >= E):
+        raise RolloutFormatError(f"{where}: field 'episode_index' has values outside [0, {E}) (len(episode_ids))")
+    if arrays["position"].shape[2:] != (3,):
+        raise RolloutFormatError(f"{where}: field 'position' has shape {arrays['position'].shape}, expected [T, B, 3]")
+
+
+# ------------------------------------------------------------------------------------------ recording
+class RolloutRecorder:
+    """Accumulates `(td, td_next)` transitions of a `NavEnv` into a `Rollout`.
+
+    Feed it from any loop: `recorder.add(td_with_action, td_next)` after each `env.step(...)`
+    (TorchRL's `step_and_maybe_reset` returns `td` with the post-step state under `"next"`), or wrap
+    the env with `RecordingEnv` so that `run_evaluation` feeds it unchanged. Tensors are moved to
+    CPU numpy per step (one copy of `[B, ...]`); frames only when `frames=True`.
+    """
+
+    def __init__(self, env, *, frames: bool = False, max_steps: int | None = None, policy: str = "policy"):
+        self.env, self.frames, self.max_steps = env, bool(frames), max_steps
+        self.policy = policy
+        self._steps: list[dict[str, np.ndarray]] = []
+        self.metrics: list[dict] = []
+
+    def __len__(self) -> int:
+        return len(self._steps)
+
+    def add(self, td, td_next) -> None:
+        """td: TensorDict `[B]` with the observation and `keys.ACTION`; td_next: the post-step TensorDict `[B]`."""
+        if self.max_steps is not None and len(self._steps) >= self.max_steps:
+            return
+
+        self._steps.append(step_arrays(td, td_next, self.frames))
+
+    def add_metrics(self, metrics) -> None:
+        self.metrics.extend(m.to_dict() if hasattr(m, "to_dict") else dict(m) for m in metrics)
+
+    def rollout(self) -> Rollout:
+        if not self._steps:
+            raise ValueError("RolloutRecorder: nothing recorded (no env steps were fed)")
+        st = {k: np.stack([s[k] for s in self._steps]) for k in self._steps[0]}
+        env = self.env
+        cam = getattr(getattr(env, "config", None), "camera", None)
+        meta = RolloutMeta(
+            scene_root=str(getattr(env.scene, "root", "")) or None,
+            episodes_path=str(env.scene.episodes_path) if getattr(env.scene, "episodes_path", None) else None,
+            up_axis=str(env.scene.up_axis),
+            nav_from_scene=np.asarray(env.scene.nav_from_scene, dtype=float).tolist(),
+            control_period=float(env.config.kinematics.control_period),
+            camera=asdict(cam) if cam is not None else {},
+            K=env.camera.K.cpu().tolist() if getattr(env, "camera", None) is not None else None,
+            policy=self.policy, metrics=list(self.metrics),
+        )
+        ids = np.asarray([str(e.episode_id) for e in env.episodes], dtype=np.str_)
+        return Rollout(**{k: st[k].astype(np.float32) if st[k].dtype.kind == "f" else st[k] for k in _FIELDS},
+                       episode_ids=ids, meta=meta, rgb=st.get("rgb"), depth=st.get("depth"))
+
+    def save(self, path: str | Path) -> Path:
+        return save_rollout(path, self.rollout())
+
+
+def step_arrays(td, td_next, frames: bool) -> dict[str, np.ndarray]:
+    """One transition of `B` agents as numpy arrays (the fields of a `Rollout` without the T axis)."""
+
+    def get(t, k, default=None):
+        v = t.get(k, None)
+        return default if v is None else v.detach().to("cpu")
+
+    action = get(td, keys.ACTION)
+    wp = get(td, keys.WAYPOINTS)
+    if wp is None:
+        wp = action if action.ndim == 3 else torch.zeros(action.shape[0], 0, 2)
+    B = action.shape[0]
+    false = torch.zeros(B, dtype=torch.bool)
+    s = {
+        "position": get(td, keys.AGENT_POSITION), "yaw": get(td, keys.AGENT_YAW).reshape(B),
+        "next_position": get(td_next, keys.AGENT_POSITION), "next_yaw": get(td_next, keys.AGENT_YAW).reshape(B),
+        "action": action, "waypoints": wp,
+        "reward": get(td_next, keys.REWARD).reshape(B), "distance_to_goal": get(td_next, keys.DISTANCE_TO_GOAL).reshape(B),
+        "done": get(td_next, keys.DONE).reshape(B), "success": get(td_next, keys.SUCCESS, false).reshape(B),
+        "collision": get(td_next, keys.COLLISION, false).reshape(B),
+        "episode_index": get(td, keys.EPISODE_INDEX).reshape(B), "step_count": get(td, keys.STEP_COUNT).reshape(B),
+    }
+    if frames:
+        s["rgb"] = get(td, keys.RGB)[:, -1]  # [B, H, W, 3] the current frame
+        d = get(td, keys.DEPTH)
+        if d is not None:
+            s["depth"] = d[:, -1]
+    return {k: v.numpy() for k, v in s.items()}
+
+
+class RecordingEnv:
+    """A transparent proxy over a `NavEnv` that feeds a `RolloutRecorder` from `step_and_maybe_reset`
+    and `pop_finished_metrics`. Lets `run_evaluation` (ENV's loop) record without changing it."""
+
+    def __init__(self, env, recorder: RolloutRecorder):
+        self._env, self.recorder = env, recorder
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def reset(self, *args, **kwargs):
+        self.recorder.metrics.clear()  # metrics popped before this reset belong to an earlier run
+        return self._env.reset(*args, **kwargs)
+
+    def step_and_maybe_reset(self, td):
+        td, td_root = self._env.step_and_maybe_reset(td)
+        self.recorder.add(td, td.get("next"))
+        return td, td_root
+
+    def pop_finished_metrics(self):
+        ms = self._env.pop_finished_metrics()
+        self.recorder.add_metrics(ms)
+        return ms
+
+
+def record_evaluation(env, policy, path: str | Path, *, num_episodes: int | None = None, seed: int = 0,
+                      name: str = "policy", frames: bool = False, progress: bool = False):
+    """`run_evaluation` with every transition recorded and saved to `path` (the `save_rollouts=` hook).
+
+    Returns `(EvaluationResult, Rollout)`.
+    """
+    from wanderland_nav.envs.evaluation import run_evaluation
+
+    rec = RolloutRecorder(env, frames=frames, policy=name)
+    res = run_evaluation(RecordingEnv(env, rec), policy, num_episodes, seed=seed, name=name, progress=progress)
+    ro = rec.rollout()
+    save_rollout(path, ro)
+    return res, ro
+
+
+def rollout_from_tensordict(td, meta: RolloutMeta | None = None, episode_ids=None) -> Rollout:
+    """A `Rollout` from a TorchRL batch `[B, T]` (a collector's output: observation + action at the root,
+    the post-step state under `"next"`). Without `meta`, poses stay in the nav frame (identity)."""
+    if td.batch_dims == 1:
+        td = td.unsqueeze(0)
+    if td.batch_dims != 2:
+        raise ValueError(f"rollout_from_tensordict: expected a TensorDict [B, T], got batch size {list(td.batch_size)}")
+    B, T = td.batch_size
+    steps = td.transpose(0, 1)  # [T, B]
+    nxt = steps.get("next")
+    frames = keys.RGB in steps.keys()
+    per_step = [step_arrays(steps[t], nxt[t], frames) for t in range(T)]  # T views of [B], not per agent
+    st = {k: np.stack([s[k] for s in per_step]) for k in per_step[0]}
+    E = int(st["episode_index"].max()) + 1 if st["episode_index"].size else 0
+    ids = np.asarray([str(i) for i in (episode_ids if episode_ids is not None else range(E))], dtype=np.str_)
+    return Rollout(**{k: st[k].astype(np.float32) if st[k].dtype.kind == "f" else st[k] for k in _FIELDS},
+                   episode_ids=ids, meta=meta if meta is not None else RolloutMeta(),
+                   rgb=st.get("rgb"), depth=st.get("depth"))
+
+
+def render_rollout_frames(meta: RolloutMeta, gaussians, *, device: str = "cpu", renderer=None, depth: bool | None = None):
+    """A frame source `(position_nav [N, 3], yaw [N]) -> (rgb u8 [N, H, W, 3], depth [N, H, W, 1] | None)`
+    that renders the agent camera exactly as the env did (same `CameraConfig`, intrinsics, pose formula),
+    batched `render_chunk` cameras per renderer call. Replay uses it when a file has no frames."""
+    from wanderland_nav.envs.camera import AgentCamera
+    from wanderland_nav.envs.config import CameraConfig
+
+    if renderer is None:
+        from wanderland_nav.render import render as renderer
+    known = {f for f in CameraConfig.__dataclass_fields__}
+    cfg = CameraConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in meta.camera.items() if k in known})
+    cfg.enabled = True
+    if depth is not None:
+        cfg.depth = bool(depth)
+    cam = AgentCamera(cfg, np.asarray(meta.nav_from_scene), renderer, gaussians.to(device), device)
+
+    def frames(position_nav: np.ndarray, yaw: np.ndarray):
+        rgb, d = cam.render(torch.as_tensor(position_nav, dtype=torch.float32, device=device),
+                            torch.as_tensor(yaw, dtype=torch.float32, device=device))
+        return rgb.cpu().numpy(), (None if d is None else d.cpu().numpy())
+
+    return frames
+
+
+def expert_rollout(episodes, nav_from_scene: np.ndarray, *, up_axis: str, camera: dict | None = None,
+                   control_period: float = 0.5, num_waypoints: int = 5, K=None) -> Rollout:
+    """The episodes' expert paths as a one-agent `Rollout`, played one after another.
+
+    Each episode contributes its `gt_locations` (dense surface samples, scene frame) as poses; the
+    heading at a sample looks toward the next one (the last keeps the previous heading); the
+    "predicted" waypoints are the next `num_waypoints` samples in the body frame (what a perfect
+    waypoint policy outputs); `distance_to_goal` is the remaining length along the path.
+    Replay renders the camera along it, so a researcher sees what the expert saw.
+    """
+    R_ns = np.asarray(nav_from_scene, np.float64)
+    pos, yaw, nxt_pos, nxt_yaw, wps, dist, done, ep_idx, step = [], [], [], [], [], [], [], [], []
+    for i, e in enumerate(episodes):  # per episode (not per sample): every line below is batched over its path
+        p = np.asarray(e.gt_locations if len(e.gt_locations) >= 2 else e.reference_path, np.float64) @ R_ns.T  # [L, 3] nav
+        if len(p) < 2:
+            continue
+        d = np.diff(p[:, :2], axis=0)  # [L-1, 2]
+        h = np.arctan2(d[:, 1], d[:, 0])
+        h = np.concatenate([h, h[-1:]])  # [L]
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=-1)
+        remain = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])  # [L]
+        L = len(p) - 1  # transitions
+        j = np.minimum(np.arange(L)[:, None] + 1 + np.arange(num_waypoints)[None], len(p) - 1)  # [L, K]
+        rel = p[j, :2] - p[:L, None, :2]
+        c, s = np.cos(h[:L])[:, None], np.sin(h[:L])[:, None]
+        wps.append(np.stack([c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]], -1))
+        pos.append(p[:L]), yaw.append(h[:L]), nxt_pos.append(p[1:]), nxt_yaw.append(h[1:])
+        dist.append(remain[1:]), ep_idx.append(np.full(L, i)), step.append(np.arange(L))
+        dn = np.zeros(L, bool)
+        dn[-1] = True
+        done.append(dn)
+    if not pos:
+        raise ValueError("expert_rollout: no episode has a path of at least 2 points")
+    cat = lambda xs, dt=np.float32: np.concatenate(xs).astype(dt)[:, None]  # noqa: E731  [T, 1, ...]
+    wp = cat(wps)
+    T = wp.shape[0]
+    meta = RolloutMeta(up_axis=up_axis, nav_from_scene=R_ns.tolist(), control_period=control_period,
+                       camera=dict(camera or {}), K=None if K is None else np.asarray(K, float).tolist(),
+                       policy="expert")
+    return Rollout(position=cat(pos), yaw=cat(yaw), next_position=cat(nxt_pos), next_yaw=cat(nxt_yaw),
+                   action=wp.copy(), waypoints=wp, reward=np.zeros((T, 1), np.float32), distance_to_goal=cat(dist),
+                   done=cat(done, bool), success=cat(done, bool), collision=np.zeros((T, 1), bool),
+                   episode_index=cat(ep_idx, np.int64), step_count=cat(step, np.int64),
+                   episode_ids=np.asarray([str(e.episode_id) for e in episodes], dtype=np.str_), meta=meta)
