@@ -76,7 +76,8 @@ def run_fit(cfg: dict) -> dict:
         log.info("LPIPS off: set lpips.backbone_path and lpips.lin_path to local AlexNet/LPIPS weights")
     if cfg.get("evaluate", True):
         results["init"] = evaluate_splits(trainer.initial_gaussians, trainer.views, trainer.render_fn,
-                                          background=fit_cfg.background, lpips=lpips)
+                                          background=fit_cfg.background, lpips=lpips,
+                                          max_views=cfg.get("eval_max_views"))
     results["train"] = trainer.train()
     if rows:
         prev = metrics_log.read_text() if metrics_log.exists() else ""
@@ -86,7 +87,8 @@ def run_fit(cfg: dict) -> dict:
         results["exported_to"] = str(trainer.export(Path(scene.root) / "3dgs.ply"))
     if cfg.get("evaluate", True):
         results["fitted"] = evaluate_splits(trainer.gaussians().detach(), trainer.views, trainer.render_fn,
-                                            background=fit_cfg.background, lpips=lpips)
+                                            background=fit_cfg.background, lpips=lpips,
+                                          max_views=cfg.get("eval_max_views"))
         table = format_table({"LiDAR init": results["init"], "fitted": results["fitted"]},
                              splits=("train", "interp", "extrap"))
         results["table"] = table

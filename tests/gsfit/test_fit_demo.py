@@ -94,3 +94,18 @@ def test_run_fit_with_evaluation_table(tiny_demo_scene, tmp_path):
     saved = json.loads((tmp_path / "run" / "results.json").read_text())
     assert saved["fitted"]["extrap"]["n"] > 0 and saved["fitted"]["interp"]["n"] > 0
     assert "Extrapolated PSNR" in res["table"] and (tmp_path / "run" / "eval_table.md").exists()
+
+
+def test_culling_does_not_change_the_image(scene):
+    from wanderland_nav.gsfit.cull import visible_gaussians
+    from wanderland_nav.gsfit.init import init_params
+    from wanderland_nav.gsfit.views import load_view
+
+    g = Gaussians(**init_params(scene.points, scene.colors, InitSettings(num_points=3000)))
+    v = load_view(scene.cameras[3], max_width=32)
+    vm, K = v.cam_from_world[None], v.K[None]
+    sub = visible_gaussians(g, vm, K, v.width, v.height)
+    assert 0 < len(sub) < len(g)
+    a = render(g, vm, K, v.width, v.height, render_mode="RGB+ED")
+    b = render(sub, vm, K, v.width, v.height, render_mode="RGB+ED")
+    assert torch.allclose(a.rgb, b.rgb, atol=1e-5) and torch.allclose(a.alpha, b.alpha, atol=1e-5)

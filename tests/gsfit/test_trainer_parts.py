@@ -151,3 +151,21 @@ def test_checkpoint_resume_round_trip(tmp_path):
     path.write_bytes(b"garbage")
     with pytest.raises(Exception):
         _trainer(tmp_path)
+
+
+def test_frustum_mask_is_conservative():
+    from wanderland_nav.gsfit.cull import frustum_mask
+
+    K = torch.tensor([[[20.0, 0, 20], [0, 20.0, 15], [0, 0, 1]]])  # 40x30 image: half-angles atan(1), atan(.75)
+    vm = torch.eye(4)[None]
+    means = torch.tensor([[0, 0, 5.0],     # straight ahead
+                          [0, 0, -5.0],    # behind
+                          [9.0, 0, 5.0],   # far right: 36 px beyond the edge
+                          [5.3, 0, 5.0],   # 1 px beyond the right edge, its footprint reaches in
+                          [0, 6.0, 5.0],   # 9 px below the bottom edge, tiny
+                          [0, 0.3, 0.2],   # in front but off-screen below; near, so its footprint is huge
+                          [0, 0, 0.005]])  # inside the near plane: culled like the renderer does
+    ls = torch.log(torch.tensor([0.01, 0.01, 0.01, 0.01, 0.001, 0.05, 1.0]))[:, None].expand(7, 3)
+    keep = frustum_mask(means, ls, vm, K, 40, 30)
+    assert keep.tolist() == [True, False, False, True, False, True, False]
+    assert frustum_mask(means, ls, vm, K, 40, 30, camera_model="fisheye").all()

@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 import torch
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.gsfit.cull import visible_gaussians
 from wanderland_nav.gsfit.views import View
 
 CACHE_VERSION = 1
@@ -39,7 +40,7 @@ def prior_key(gaussians, views: Sequence[View], min_alpha: float) -> str:
 
 @torch.no_grad()
 def render_depth_priors(gaussians, views: Sequence[View], render_fn: Callable, *,
-                        min_alpha: float = 0.5, chunk: int = 4) -> list[torch.Tensor]:
+                        min_alpha: float = 0.5, chunk: int = 1) -> list[torch.Tensor]:
     """Expected depth [H, W, 1] per view (NaN where uncovered), rendered in camera batches."""
     out: list[torch.Tensor | None] = [None] * len(views)
     groups: dict[tuple, list[int]] = {}
@@ -49,8 +50,8 @@ def render_depth_priors(gaussians, views: Sequence[View], render_fn: Callable, *
     for (w, h, model), idx in groups.items():
         for s in range(0, len(idx), chunk):
             sel = idx[s:s + chunk]
-            res = render_fn(g, torch.stack([views[i].cam_from_world for i in sel]),
-                            torch.stack([views[i].K for i in sel]), w, h,
+            vm, K = torch.stack([views[i].cam_from_world for i in sel]), torch.stack([views[i].K for i in sel])
+            res = render_fn(visible_gaussians(g, vm, K, w, h, camera_model=model), vm, K, w, h,
                             render_mode="RGB+ED", camera_model=model)
             if res.depth is None:
                 raise RuntimeError("render() returned no depth for render_mode='RGB+ED'")

@@ -19,13 +19,15 @@ from typing import Callable, Sequence
 import torch
 
 from wanderland_nav.gsfit.metrics import psnr, ssim
+from wanderland_nav.gsfit.cull import visible_gaussians
 from wanderland_nav.gsfit.views import View
 
 
 @torch.no_grad()
 def render_views(gaussians, views: Sequence[View], render_fn: Callable, *,
-                 background=(0.0, 0.0, 0.0), chunk: int = 4) -> list[torch.Tensor]:
-    """RGB [H, W, 3] in [0, 1] for every view, rendered in same-shape camera batches."""
+                 background=(0.0, 0.0, 0.0), chunk: int = 1) -> list[torch.Tensor]:
+    """RGB [H, W, 3] in [0, 1] for every view (one camera per call by default: the frustum cull is
+    per call, and on CPU single-camera calls measured faster than batches)."""
     out: list[torch.Tensor | None] = [None] * len(views)
     groups: dict[tuple, list[int]] = {}
     for i, v in enumerate(views):
@@ -36,8 +38,9 @@ def render_views(gaussians, views: Sequence[View], render_fn: Callable, *,
         for s in range(0, len(idx), chunk):
             sel = idx[s:s + chunk]
             bg = torch.tensor(background, dtype=torch.float32, device=dev).expand(len(sel), 3)
-            res = render_fn(g, torch.stack([views[i].cam_from_world for i in sel]).to(dev),
-                            torch.stack([views[i].K for i in sel]).to(dev), w, h,
+            vm = torch.stack([views[i].cam_from_world for i in sel]).to(dev)
+            K = torch.stack([views[i].K for i in sel]).to(dev)
+            res = render_fn(visible_gaussians(g, vm, K, w, h, camera_model=model), vm, K, w, h,
                             render_mode="RGB", background=bg, camera_model=model)
             for j, i in enumerate(sel):
                 out[i] = res.rgb[j].clamp(0, 1).float().cpu()
@@ -64,11 +67,21 @@ def evaluate_views(gaussians, views: Sequence[View], render_fn: Callable, *,
     return {**out, "n": len(per), "per_view": per}
 
 
+def subsample(views: Sequence, max_views: int | None) -> list:
+    """At most `max_views` views, evenly spaced along the sequence (all when None)."""
+    views = list(views)
+    if max_views is None or len(views) <= max_views:
+        return views
+    idx = [round(i * (len(views) - 1) / max(1, max_views - 1)) for i in range(max_views)]
+    return [views[i] for i in sorted(set(idx))]
+
+
 def evaluate_splits(gaussians, views: dict[str, Sequence[View]], render_fn: Callable, *,
                     splits=("train", "interp", "extrap"), background=(0.0, 0.0, 0.0),
-                    lpips=None) -> dict[str, dict]:
-    return {s: evaluate_views(gaussians, views.get(s, []), render_fn, background=background, lpips=lpips)
-            for s in splits}
+                    lpips=None, max_views: int | None = None) -> dict[str, dict]:
+    """`evaluate_views` per split; `max_views` caps each split (evenly spaced) to bound CPU time."""
+    return {s: evaluate_views(gaussians, subsample(views.get(s, []), max_views), render_fn,
+                              background=background, lpips=lpips) for s in splits}
 
 
 def format_table(rows: dict[str, dict[str, dict]], splits=("interp", "extrap")) -> str:

@@ -35,7 +35,8 @@ class InitSettings:
     scale_multiplier: float = 1.0
     min_scale: float = 1e-4  # metres; guards duplicate points (zero kNN distance)
     max_scale: float = 1.0  # metres; guards isolated outliers
-    ref_opacity: float = 0.1  # opacity of a Gaussian with the median initial volume
+    ref_opacity: float = 0.5  # opacity of a Gaussian with the median initial volume (0.1, INRIA's
+    # constant, renders the sparse LiDAR splats too transparent: -4.5 dB train PSNR on the demo)
     min_opacity: float = 0.01
     max_opacity: float = 0.99
     sh_degree: int = 3  # storage degree; the active degree grows during training

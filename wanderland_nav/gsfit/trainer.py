@@ -27,6 +27,7 @@ import torch
 from tqdm.auto import tqdm
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.gsfit.cull import visible_gaussians
 from wanderland_nav.gsfit.depth_prior import depth_priors
 from wanderland_nav.gsfit.init import InitSettings, active_sh_degree, init_params
 from wanderland_nav.gsfit.losses import LossWeights, inverse_depth_valid, total_loss
@@ -263,7 +264,9 @@ class Trainer:
         need_depth = self.depth_prior is not None
         sh = active_sh_degree(self.step, cfg.sh_increase_every, cfg.init.sh_degree)
         w, h, model = views[0].shape_key
-        out = self.render_fn(self.gaussians(sh), self._viewmats(views, idx), batch["K"], w, h,
+        viewmats = self._viewmats(views, idx)
+        g = visible_gaussians(self.gaussians(sh), viewmats, batch["K"], w, h, camera_model=model)
+        out = self.render_fn(g, viewmats, batch["K"], w, h,
                              render_mode="RGB+ED" if need_depth else "RGB",
                              background=self._background(len(idx)), camera_model=model)
         prior = valid = None
