@@ -54,7 +54,9 @@ class GeodesicField:
         nm = self.nm
         p = torch.as_tensor(points)
         out_dtype = p.dtype if p.is_floating_point() else torch.float32
-        gi = torch.as_tensor(goal_index, dtype=torch.long).reshape(-1)
+        device = p.device  # the navmesh lives on the CPU; results go back where the points came from
+        p = p.cpu()
+        gi = torch.as_tensor(goal_index, dtype=torch.long).reshape(-1).cpu()
         loc = nm.to_local(p.reshape(-1, 3).double())
         if gi.shape[0] != loc.shape[0]:
             raise ValueError(f"GeodesicField.lookup: {loc.shape[0]} points but {gi.shape[0]} goal indices")
@@ -62,7 +64,7 @@ class GeodesicField:
         general = ~self._goal_simple[gi]
         if general.any():  # goals on islands with overlapping levels: triangle walks
             d[general] = self._lookup_general(loc[general], gi[general])
-        return d.to(out_dtype).reshape(p.shape[:-1])
+        return d.to(out_dtype).reshape(p.shape[:-1]).to(device)
 
     @property
     def _goal_simple(self) -> torch.Tensor:

@@ -36,6 +36,9 @@ def move_along_surface(nm, start, target):
     Starts off the mesh are first snapped to it (no distance limit: agents are expected on it)."""
     s = torch.as_tensor(start)
     dtype = s.dtype if s.is_floating_point() else torch.float32
+    device = s.device  # the navmesh lives on the CPU; results go back where the inputs came from
+    s = s.cpu()
+    target = torch.as_tensor(target).cpu()
     ls = nm.to_local(s.reshape(-1, 3).double())
     lt = nm.to_local(torch.as_tensor(target).reshape(-1, 3).double())
     if ls.shape != lt.shape:
@@ -58,7 +61,7 @@ def move_along_surface(nm, start, target):
     end_tri = r.tri.clone()
     collided = ~r.reached
     hit = torch.nonzero(collided)[:, 0]
-    if len(hit):
+    if hit.shape[0]:
         h, e = _stop_at_wall(nm, r.tri[hit], r.edge[hit], xy0[hit], q[hit], r.t_hit[hit])
         rem = q[hit] - h
         q2 = h + (rem * e).sum(1, keepdim=True) * e  # slide: keep the motion along the wall
@@ -73,4 +76,4 @@ def move_along_surface(nm, start, target):
         end_tri[hit] = r2.tri
     z = nm.surface_z(end_tri, end_xy)
     end = nm.to_scene(torch.cat([end_xy, z[:, None]], 1)).to(dtype).reshape(s.shape)
-    return end, collided.reshape(s.shape[:-1])
+    return end.to(device), collided.reshape(s.shape[:-1]).to(device)

@@ -222,6 +222,7 @@ class NavMesh:
         self._t["tri_plane"] = torch.from_numpy(coef)
         self._t["node_z"] = (self.surface_z(self._t["node_tri"], self._t["node_xy"]) if len(self.node_xy)
                              else torch.zeros(0, dtype=torch.float64))
+        self.node_z_np = self._t["node_z"].numpy()
         self.R_t = torch.from_numpy(self.nav_from_scene)
         self.bmin_t = torch.from_numpy(self.bmin.astype(np.float64))
 
@@ -318,7 +319,7 @@ class NavMesh:
         iy = torch.floor(xy[:, 1] / self.cs).long().clamp(0, self.height - 1)
         key = region * self.ncols + ix + iy * self.width
         rs = t["rc_sorted"]
-        j = torch.searchsorted(rs, key).clamp(max=max(len(rs) - 1, 0))
+        j = torch.searchsorted(rs, key).clamp(max=max(rs.shape[0] - 1, 0))
         hit = rs[j] == key
         span = t["rc_order"][j]
         zc = t["span_floor"][span] * self.ch
@@ -388,27 +389,27 @@ class NavMesh:
         xy = p[:, :2].clone()
         dist = torch.zeros(B, dtype=torch.float64)
         miss = torch.nonzero(tri < 0)[:, 0]
-        if len(miss) and len(self.tris):
+        if miss.shape[0] and len(self.tris):
             txy, tz = self._t["tri_xy"], self._t["tri_z"]
-            for s in range(0, len(miss), chunk):
+            for s in range(0, miss.shape[0], chunk):
                 m = miss[s:s + chunk]
                 q = p[m]
                 cp = closest_point_on_tris(txy, q[:, :2])  # [b,T,2]
                 T = txy.shape[0]
-                tt = torch.arange(T).expand(len(m), T)
-                zt = self.surface_z(tt.reshape(-1), cp.reshape(-1, 2)).reshape(len(m), T)
+                tt = torch.arange(T).expand(m.shape[0], T)
+                zt = self.surface_z(tt.reshape(-1), cp.reshape(-1, 2)).reshape(m.shape[0], T)
                 d2 = ((cp - q[:, None, :2]) ** 2).sum(-1) + (q[:, None, 2] - zt) ** 2
                 j = d2.argmin(1)
                 tri[m] = j
                 # nudge 1e-6 m towards the centroid so the point is strictly inside (clean line-of-sight tests)
                 c = txy[j].mean(1)
-                cpj = cp[torch.arange(len(m)), j]
+                cpj = cp[torch.arange(m.shape[0]), j]
                 v = c - cpj
                 xy[m] = cpj + 1e-6 * v / v.norm(dim=1, keepdim=True).clamp_min(1e-12)
-                dist[m] = d2[torch.arange(len(m)), j].sqrt()
-        elif len(miss):
+                dist[m] = d2[torch.arange(m.shape[0]), j].sqrt()
+        elif miss.shape[0]:
             dist[miss] = float("inf")
-        if len(miss) and len(self.tris):
+        if miss.shape[0] and len(self.tris):
             z[miss] = self.surface_z(tri[miss], xy[miss])
         if max_distance is not None:
             bad = dist > max_distance

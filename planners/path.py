@@ -39,12 +39,12 @@ def _visible_to_nodes(nm, xy: torch.Tensor, tri: torch.Tensor, isl: torch.Tensor
     cand = (t["node_island"][None, :] == isl[:, None]) & tangent_ok(
         xy[:, None, :], t["node_xy"], t["node_prev"], t["node_next"], t["node_tangent"])
     qi, mi = torch.nonzero(cand, as_tuple=True)
-    if len(qi):
+    if qi.shape[0]:
         # from the corner to the point: the corner's visibility polygon answers it in one lookup
         vis = visible(t["tri_xy"], t["nbr"], nm.walls, isl[qi], t["node_tri"][mi], t["node_xy"][mi], xy[qi],
                       nm.vispolys, mi, t["tri_region"][tri[qi]], t["tri_region"])
         qi, mi = qi[vis], mi[vis]
-        out[qi, mi] = (xy[qi] - t["node_xy"][mi]).norm(dim=1)
+        out[qi, mi] = (xy[qi] - t["node_xy"][mi]).square().sum(1).sqrt()
     return out
 
 
@@ -70,21 +70,21 @@ def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 2
     isl_g = torch.where(ok, t["tri_island"][g_tri.clamp_min(0)], torch.full_like(g_tri, -2))
     same = ok & (isl_s == isl_g)
     idx = torch.nonzero(same)[:, 0]
-    if len(idx) == 0:
+    if idx.shape[0] == 0:
         return (dist, a_out, b_out) if with_nodes else dist
     seen = visible(t["tri_xy"], t["nbr"], nm.walls, isl_s[idx], s_tri[idx], s_xy[idx], g_xy[idx],
                    q_region=t["tri_region"][g_tri[idx]], tri_region=t["tri_region"])
     direct = idx[seen]
-    dist[direct] = (s_xy[direct] - g_xy[direct]).norm(dim=1)
+    dist[direct] = (s_xy[direct] - g_xy[direct]).square().sum(1).sqrt()
     rest = idx[~seen]
     D = t["D"]
     M = D.shape[0]
-    for c in range(0, len(rest), chunk):
+    for c in range(0, rest.shape[0], chunk):
         q = rest[c:c + chunk]
         # both ends in one batch: [2q,M] distances to the corners each end sees
         AB = _visible_to_nodes(nm, torch.cat([s_xy[q], g_xy[q]]), torch.cat([s_tri[q], g_tri[q]]),
                                torch.cat([isl_s[q], isl_g[q]]))
-        A, Bv = AB[:len(q)], AB[len(q):]
+        A, Bv = AB[:q.shape[0]], AB[q.shape[0]:]
         if M == 0:
             continue
         va, ia = _compact(A)
@@ -92,7 +92,7 @@ def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 2
         if va.shape[1] == 0 or vb.shape[1] == 0:
             continue
         tot = va[:, :, None] + D[ia[:, :, None], ib[:, None, :]] + vb[:, None, :]  # [q,ka,kb]
-        v, k = tot.reshape(len(q), -1).min(1)
+        v, k = tot.reshape(q.shape[0], -1).min(1)
         dist[q] = v
         a_out[q] = ia.gather(1, (k // vb.shape[1])[:, None])[:, 0]
         b_out[q] = ib.gather(1, (k % vb.shape[1])[:, None])[:, 0]
@@ -123,21 +123,20 @@ def find_path(nm, start, goal, max_distance: float | None = None):
     d = float(dist[0])
     if not np.isfinite(d):
         return PathResult(np.zeros((0, 3)), float("inf"), False)
-    pts = [torch.cat([s_xy[0], s_z])]
-    if int(a[0]) >= 0:
-        chain = [int(b[0])]
-        ai = int(a[0])
+    # corners in numpy: a handful of points, cheaper than a dozen small torch calls
+    ends = torch.cat([xy, z[:, None]], 1).numpy()  # [2,3] local nav frame
+    ai, bi = int(a[0]), int(b[0])
+    if ai >= 0:
+        chain = [bi]
         while chain[-1] != ai:
             chain.append(int(nm.P[ai, chain[-1]]))
         chain.reverse()
-        nodes = torch.tensor(chain, dtype=torch.long)
-        nxy = nm._t["node_xy"][nodes]
-        nz = nm._t["node_z"][nodes]
-        pts.extend(torch.cat([nxy, nz[:, None]], 1))
-    pts.append(torch.cat([g_xy[0], g_z]))
-    local = torch.stack(pts)
-    length = float((local[1:, :2] - local[:-1, :2]).norm(dim=1).sum())
-    return PathResult(nm.to_scene(local).numpy(), length, True)
+        mids = np.concatenate([nm.node_xy[chain], nm.node_z_np[chain, None]], 1)
+        local = np.concatenate([ends[:1], mids, ends[1:]])
+    else:
+        local = ends
+    length = float(np.linalg.norm(np.diff(local[:, :2], axis=0), axis=1).sum())
+    return PathResult((local + nm.bmin) @ nm.nav_from_scene, length, True)
 
 
 def geodesic_distance(nm, starts, goals, max_distance: float | None = None) -> torch.Tensor:

@@ -183,7 +183,7 @@ class VisPolys:
             edges = -torch.pi + 2 * torch.pi * torch.arange(self.N_BINS + 1, dtype=torch.float64) / self.N_BINS
             q = (torch.arange(S, dtype=torch.float64)[:, None] * 32 + 16.0 + edges[None]).reshape(-1)
             self._bucket = torch.searchsorted(self.keys, q).reshape(S, self.N_BINS + 1)
-        L = len(self.keys)
+        L = self.keys.shape[0]
         b = ((th + torch.pi) * (self.N_BINS / (2 * torch.pi))).long().clamp_(0, self.N_BINS - 1)
         i = self._bucket[src, b]
         for _ in range(3):
@@ -204,7 +204,7 @@ class VisPolys:
 
         The fan triangle (source, h0, h1) bracketing p's angle is counter-clockwise, so p is
         visible iff it lies left of h0 -> h1 (within 1e-9 m)."""
-        if p.shape[0] == 0 or len(self.keys) < 2:
+        if p.shape[0] == 0 or self.keys.shape[0] < 2:
             return torch.zeros(p.shape[0], dtype=torch.bool)
         if not hasattr(self, "_hx"):
             self._hx, self._hy = self.hits[:, 0].contiguous(), self.hits[:, 1].contiguous()
@@ -212,7 +212,7 @@ class VisPolys:
         px, py = p[:, 0], p[:, 1]
         th = torch.atan2(py - self._sy[src], px - self._sx[src])
         key = src * 32 + 16.0 + th
-        i1 = self._first_at_least(src, th, key).clamp_(1, len(self.keys) - 1)
+        i1 = self._first_at_least(src, th, key).clamp_(1, self.keys.shape[0] - 1)
         i0 = i1 - 1
         x0, y0 = self._hx[i0], self._hy[i0]
         ex, ey = self._hx[i1] - x0, self._hy[i1] - y0
@@ -234,7 +234,7 @@ def visible(tri_xy, nbr, walls: Walls, isl: torch.Tensor, tri0: torch.Tensor, p:
         return out
     simple = walls.simple[isl]
     w = torch.nonzero(~simple)[:, 0]
-    if len(w):
+    if w.shape[0]:
         r = walk(tri_xy, nbr, tri0[w], p[w], q[w])
         ok = r.reached
         if q_region is not None:
@@ -246,7 +246,7 @@ def visible(tri_xy, nbr, walls: Walls, isl: torch.Tensor, tri0: torch.Tensor, p:
         out[ui] = vispolys.sees(src[ui], q[ui])
         simple = simple & ~use
     sidx = torch.nonzero(simple)[:, 0]
-    if len(sidx):
+    if sidx.shape[0]:
         isl_s = isl[sidx]
         for u in torch.unique(isl_s).tolist():
             m = sidx[isl_s == u]
