@@ -123,7 +123,7 @@ def project_gaussians(
         means2d, J = _fisheye_jacobian(mc, Ks)
     else:
         means2d, J = _ortho_jacobian(mc, Ks)
-    T = J @ R[:, None]  # [C, N, 2, 3] = J W
+    T = torch.einsum("cnak,cki->cnai", J, R)  # [C, N, 2, 3] = J W
     cov2d = T @ covars[None] @ T.transpose(-1, -2)  # [C, N, 2, 2]
     c00, c01, c11 = cov2d[..., 0, 0], 0.5 * (cov2d[..., 0, 1] + cov2d[..., 1, 0]), cov2d[..., 1, 1]
     det_orig = c00 * c11 - c01 * c01

@@ -74,23 +74,23 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
         y1 = torch.ceil((m[:, 1] + r[:, 1]) / tile_size).clamp_(0, tile_height).long()
         wx = (x1 - x0).clamp_(min=0)
         cnt = wx * (y1 - y0).clamp_(min=0)  # [V] tiles per Gaussian
-        # depth rank of each visible Gaussian: exact order via an integer radix sort (stable on ties)
+        # Visit Gaussians in depth order (exact: integer radix sort of the float bits, stable on ties),
+        # expand each into its covered tiles, then a *stable* sort by tile id (a small integer key)
+        # keeps depth order inside every tile. Two cheap radix sorts instead of one on wide keys.
         order = torch.sort(_sortable_int(depths.detach().reshape(-1).index_select(0, vis)), stable=True).indices
-        rank = torch.empty_like(order)
-        rank[order] = torch.arange(V, device=dev)
-        # per-Gaussian base key: camera tile-row origin and depth rank, expanded once per covered tile
+        cnt_o = cnt.index_select(0, order)
         cam = torch.div(vis, N, rounding_mode="floor")
-        base = ((cam * tile_height + y0) * tile_width + x0) * V + rank  # key of the Gaussian's first tile
-        M = int(cnt.sum())
-        g = torch.repeat_interleave(torch.arange(V, device=dev), cnt, output_size=M)  # [M]
-        k = torch.arange(M, device=dev) - (torch.cumsum(cnt, 0) - cnt).index_select(0, g)
-        wg = wx.index_select(0, g)
+        first_tile = ((cam * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
+        wx_o = wx.index_select(0, order)
+        M = int(cnt_o.sum())
+        src = torch.repeat_interleave(torch.arange(V, device=dev), cnt_o, output_size=M)  # [M] depth-order slot
+        k = torch.arange(M, device=dev) - (torch.cumsum(cnt_o, 0) - cnt_o).index_select(0, src)
+        wg = wx_o.index_select(0, src)
         dy = torch.div(k, wg, rounding_mode="floor")
-        dx = k - dy * wg
-        key = base.index_select(0, g) + (dy * tile_width + dx) * V
-        key, perm = torch.sort(key)
-        ent = g.index_select(0, perm)
-        counts = torch.bincount(torch.div(key, V, rounding_mode="floor"), minlength=num_tiles)
+        tile = first_tile.index_select(0, src) + dy * tile_width + (k - dy * wg)
+        tile, perm = torch.sort(tile, stable=True)
+        ent = order.index_select(0, src.index_select(0, perm))
+        counts = torch.bincount(tile, minlength=num_tiles)
     return vis, ent, counts
 
 
@@ -131,12 +131,22 @@ def _quad_coefs(rows: torch.Tensor, center: torch.Tensor, valid: torch.Tensor):
     return q, mx, my
 
 
-def _alpha_raw(feat: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
-    """o exp(-sigma) for every pixel and entry, [P, Ta, L]. The clamp at -30 avoids denormals from exp
-    (about 100x slower on x86); anything below log(1/255) is skipped anyway, so no result changes."""
-    P = feat.shape[0]
+def _alpha_raw(geo: "_Tiles", q: torch.Tensor) -> torch.Tensor:
+    """o exp(-sigma) for every pixel and entry, [P, Ta, L].
+
+    The quadratic is separable on the tile grid: -s(u, v) = X(u) + Y(v) + q2 u v with
+    X = q0 u^2 + q3 u + q5 and Y = q1 v^2 + q4 v, so only two full-size passes are needed (a K=6
+    GEMM is several times slower on CPU). The clamp at -30 avoids denormals from exp (about 100x
+    slower on x86); anything below log(1/255) is skipped anyway, so no result changes.
+    """
     _, Ta, L = q.shape
-    return torch.mm(feat, q.view(6, Ta * L)).view(P, Ta, L).clamp_(min=-30.0).exp_()
+    q = q.view(6, Ta * L)
+    c, c2 = geo.coords[:, None], geo.coords2[:, None]  # [ts, 1]
+    X = torch.addcmul(torch.addcmul(q[5][None], c, q[3][None]), c2, q[0][None])  # [ts(u), TL]
+    Y = torch.addcmul(c * q[4][None], c2, q[1][None])  # [ts(v), TL]
+    s = torch.add(Y[:, None, :], X[None, :, :])  # [v, u, TL]
+    s.addcmul_(geo.uv[:, :, None], q[2][None, None, :])
+    return s.view(geo.P, Ta, L).clamp_(min=-30.0).exp_()
 
 
 def _transmittance(alpha: torch.Tensor, T_in: torch.Tensor, check_termination: bool):
@@ -201,7 +211,10 @@ class _Tiles:
         self.C, self.H, self.W, self.ts = C, H, W, ts
         self.TW, self.TH = -(-W // ts), -(-H // ts)
         self.P = ts * ts
-        self.feat = _pixel_features(ts, dtype, device)
+        self.feat = _pixel_features(ts, dtype, device)  # [P, 6]
+        self.coords = torch.arange(ts, dtype=dtype, device=device) + 0.5 - ts / 2.0  # tile-local centres
+        self.coords2 = self.coords * self.coords
+        self.uv = self.coords[:, None] * self.coords[None, :]  # [v, u]
         self.device, self.dtype = device, dtype
 
     def centers(self, tiles: torch.Tensor) -> torch.Tensor:
@@ -266,7 +279,7 @@ class _RasterizeFn(torch.autograd.Function):
                 j, valid = plan.entries(tiles_h, consumed, L, dev)
                 rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(len(tiles_h), L, K)
                 q, _, _ = _quad_coefs(rows, center, valid)
-                alpha = _alpha_raw(geo.feat, q).clamp_(max=ALPHA_MAX)
+                alpha = _alpha_raw(geo, q).clamp_(max=ALPHA_MAX)
                 torch.nn.functional.threshold_(alpha, th, 0.0)
                 nT, w = _transmittance(alpha, T, check_termination=on_cpu)
                 acc.baddbmm_(w.permute(1, 0, 2), rows[..., 6:])
@@ -300,7 +313,7 @@ class _RasterizeFn(torch.autograd.Function):
         th = _alpha_threshold(dtype)
         g_tiles = geo.from_image(g_img.contiguous())  # [NT, P, D+1]
         total = (geo.from_image(img) * g_tiles).sum(-1)  # [NT, P] = sum_j w_j (c_j . g), per pixel
-        g_rows = torch.zeros(V, K, dtype=dtype, device=dev)  # d/d(mx, my, a, b, c, log o, colours, 1)
+        g_rows = torch.zeros(K, V, dtype=dtype, device=dev)  # d/d(mx, my, a, b, c, log o, colours, 1)
         on_cpu = dev.type == "cpu"
         feat = geo.feat
         for tiles_h in plan.groups:
@@ -317,13 +330,13 @@ class _RasterizeFn(torch.autograd.Function):
                 e = ent.index_select(0, j.view(-1))
                 rows = table.index_select(0, e).view(Ta, L, K)
                 q, mx, my = _quad_coefs(rows, center, valid)
-                alpha_raw = _alpha_raw(feat, q)  # [P, Ta, L]
+                alpha_raw = _alpha_raw(geo, q)  # [P, Ta, L]
                 alpha = alpha_raw.clamp(max=ALPHA_MAX)
                 torch.nn.functional.threshold_(alpha, th, 0.0)
                 om = torch.rsub(alpha, 1.0)
                 nT, w = _transmittance(alpha, T, check_termination=on_cpu)  # alpha is now w
                 col = rows[..., 6:]  # [Ta, L, D+1]
-                cg = torch.bmm(gt, col.transpose(1, 2)).permute(1, 0, 2)  # [P, Ta, L]  c_j . g
+                cg = torch.einsum("tpd,tld->ptl", gt, col)  # [P, Ta, L]  c_j . g
                 g_col = torch.bmm(w.permute(1, 2, 0), gt)  # [Ta, L, D+1] sum_p w g
                 # rest_j = sum_{k>j} w_k cg_k = rest0 - cumsum_j(w cg)
                 rest = torch.mul(w, cg).cumsum_(-1).neg_().add_(rest0[:, :, None])
@@ -333,21 +346,21 @@ class _RasterizeFn(torch.autograd.Function):
                 dA = Tj.mul_(cg).sub_(rest.div_(om))
                 # d alpha / d(-s) = alpha_raw where alpha is neither skipped, clamped nor excluded (w > 0)
                 dA.mul_(alpha_raw).mul_((w > 0) & (alpha_raw <= ALPHA_MAX))
-                gq = torch.mm(dA.view(geo.P, Ta * L).t(), feat).view(Ta, L, 6)  # dL/dq
+                gq = torch.mm(feat.t(), dA.view(geo.P, Ta * L)).view(6, Ta, L)  # dL/dq (K=P GEMM: fast)
                 # q = (-a/2, -c/2, -b, a mx + b my, b mx + c my, log o - 0.5(a mx^2 + c my^2) - b mx my)
                 a, b, c = rows[..., 2], rows[..., 3], rows[..., 4]
-                g0, g1, g2, g3, g4, g5 = gq.unbind(-1)
+                g0, g1, g2, g3, g4, g5 = gq.unbind(0)
                 amb, bmc = a * mx + b * my, b * mx + c * my
-                upd = torch.empty(Ta, L, K, dtype=dtype, device=dev)
-                upd[..., 0] = g3 * a + g4 * b - g5 * amb
-                upd[..., 1] = g3 * b + g4 * c - g5 * bmc
-                upd[..., 2] = -0.5 * g0 + g3 * mx - 0.5 * g5 * mx * mx
-                upd[..., 3] = -g2 + g3 * my + g4 * mx - g5 * mx * my
-                upd[..., 4] = -0.5 * g1 + g4 * my - 0.5 * g5 * my * my
-                upd[..., 5] = g5
-                upd[..., 6:] = g_col
-                upd.mul_(valid[..., None])
-                g_rows.index_add_(0, e, upd.view(Ta * L, K))
+                upd = torch.empty(K, Ta, L, dtype=dtype, device=dev)  # [K, Ta, L]: row-wise scatter is fast
+                upd[0] = g3 * a + g4 * b - g5 * amb
+                upd[1] = g3 * b + g4 * c - g5 * bmc
+                upd[2] = -0.5 * g0 + g3 * mx - 0.5 * g5 * mx * mx
+                upd[3] = -g2 + g3 * my + g4 * mx - g5 * mx * my
+                upd[4] = -0.5 * g1 + g4 * my - 0.5 * g5 * my * my
+                upd[5] = g5
+                upd[6:] = g_col.permute(2, 0, 1)
+                upd.mul_(valid)
+                g_rows.index_add_(1, e, upd.view(K, Ta * L))
                 T = nT[:, :, -1]
                 consumed += L
                 keep = plan.counts[tiles_h] > consumed
@@ -359,6 +372,7 @@ class _RasterizeFn(torch.autograd.Function):
                     center, gt = center[kept], gt[kept]
                     T, rest0 = T.index_select(1, kept), rest0.index_select(1, kept)
         o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
+        g_rows = g_rows.t()
         return (g_rows[:, 0:2], g_rows[:, 2:5], g_rows[:, 5] / o_safe, g_rows[:, 6:6 + D],
                 None, None, None, None, None, None, None)
 
