@@ -56,7 +56,7 @@ def _compact(A: torch.Tensor):
     return A.gather(1, order), order
 
 
-def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 256):
+def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, budget: int = 8_000_000):
     """Exact horizontal shortest distances `[Q]` between located local points (inf if apart).
 
     With `with_nodes`, also returns the first and last corner (a, b; -1 for a direct segment)."""
@@ -79,6 +79,7 @@ def solve(nm, s_xy, s_tri, g_xy, g_tri, with_nodes: bool = False, chunk: int = 2
     rest = idx[~seen]
     D = t["D"]
     M = D.shape[0]
+    chunk = max(16, budget // max(1, M * M))  # the min-plus block is [chunk, <=M, <=M] float64
     for c in range(0, rest.shape[0], chunk):
         q = rest[c:c + chunk]
         # both ends in one batch: [2q,M] distances to the corners each end sees
