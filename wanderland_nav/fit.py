@@ -59,9 +59,17 @@ def run_fit(cfg: dict) -> dict:
     log_every = int(cfg.get("log_every", 0))
     rows: list[str] = []
 
+    rerun_logger = None
+    if cfg.get("rerun", False):
+        from wanderland_nav.viz.rerun_logger import RerunLogger  # rerun only behind viz/
+
+        rerun_logger = RerunLogger(out_dir, rollout_every=0, file_name="fit.rrd")
+
     def log_fn(step, scalars, _images):
         if log_every and step % log_every == 0:
             rows.append(json.dumps(json_safe({"step": step, **scalars})))
+            if rerun_logger is not None:
+                rerun_logger.log_scalars({f"fit/{k}": v for k, v in scalars.items()}, step)
 
     trainer = Trainer(scene, out_dir, fit_cfg, log_fn=log_fn, resume=bool(cfg.get("resume", True)),
                       progress=bool(cfg.get("progress", True)))
@@ -95,6 +103,8 @@ def run_fit(cfg: dict) -> dict:
         atomic_write_text(out_dir / "eval_table.md", table + "\n")
         print(table)
     atomic_write_json(out_dir / "results.json", json_safe(results))
+    if rerun_logger is not None:
+        rerun_logger.close()
     log.info("wrote %s (%d Gaussians) after %d steps in %.1f s", ply, results["train"]["num_gaussians"],
              results["train"]["step"], results["train"]["seconds"])
     return results

@@ -78,8 +78,9 @@ def _run_fit_cfg(scene_path, out, evaluate):
 def test_run_fit_entry_point_writes_results(tiny_demo_scene, tmp_path):
     from wanderland_nav.fit import run_fit
 
-    run_fit(_run_fit_cfg(tiny_demo_scene, tmp_path / "run", evaluate=False))
+    run_fit({**_run_fit_cfg(tiny_demo_scene, tmp_path / "run", evaluate=False), "rerun": True})
     out = tmp_path / "run"
+    assert (out / "fit.rrd").stat().st_size > 0
     assert (out / "3dgs.ply").exists() and not (out / "eval_table.md").exists()
     saved = json.loads((out / "results.json").read_text())
     assert saved["train"]["step"] == 2 and saved["config"]["fit"]["iterations"] == 2
