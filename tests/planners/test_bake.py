@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from planners import NavMesh, NavMeshSettings
-from tests.planners.conftest import bake, box, concat, l_floor, quad, stairs, two_floors
+from navmesh_meshes import bake, box, concat, l_floor, quad, stairs, two_floors
 
 
 def test_l_floor_area_and_erosion(l_nm):

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from planners import NavMesh, NavMeshSettings
-from tests.planners.conftest import bake, room_with_pillars, stairs
+from navmesh_meshes import bake, room_with_pillars, stairs
 
 
 def test_field_matches_geodesic(room_nm):

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from planners import OffMeshError
-from tests.planners.conftest import bake, concat, quad, box
+from navmesh_meshes import bake, concat, quad, box
 
 HYP = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
