@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import time
 from pathlib import Path
 
 import hydra
@@ -52,6 +53,7 @@ def run_fit(cfg: dict) -> dict:
     from wanderland_nav.gsfit.evaluate import evaluate_splits, format_table
     from wanderland_nav.gsfit.trainer import Trainer, fit_config_from_dict
 
+    t_start, c_start = time.perf_counter(), time.process_time()
     fit_cfg = fit_config_from_dict(cfg["fit"])
     out_dir = Path(cfg["out_dir"])
     scene = load_fit_scene(cfg["scene"])
@@ -71,8 +73,10 @@ def run_fit(cfg: dict) -> dict:
             if rerun_logger is not None:
                 rerun_logger.log_scalars({f"fit/{k}": v for k, v in scalars.items()}, step)
 
+    t0, c0 = time.perf_counter(), time.process_time()
     trainer = Trainer(scene, out_dir, fit_cfg, log_fn=log_fn, resume=bool(cfg.get("resume", True)),
                       progress=bool(cfg.get("progress", True)))
+    timing = {"setup_s": time.perf_counter() - t0, "setup_cpu_s": time.process_time() - c0}
     results: dict = {"config": cfg}
     lpips = None
     lp = cfg.get("lpips") or {}
@@ -86,7 +90,9 @@ def run_fit(cfg: dict) -> dict:
         results["init"] = evaluate_splits(trainer.initial_gaussians, trainer.views, trainer.render_fn,
                                           background=fit_cfg.background, lpips=lpips,
                                           max_views=cfg.get("eval_max_views"))
+    t0, c0 = time.perf_counter(), time.process_time()
     results["train"] = trainer.train()
+    timing["train_s"], timing["train_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
     if rows:
         prev = metrics_log.read_text() if metrics_log.exists() else ""
         atomic_write_text(metrics_log, prev + "\n".join(rows) + "\n")
@@ -102,11 +108,13 @@ def run_fit(cfg: dict) -> dict:
         results["table"] = table
         atomic_write_text(out_dir / "eval_table.md", table + "\n")
         print(table)
+    timing["total_s"], timing["total_cpu_s"] = time.perf_counter() - t_start, time.process_time() - c_start
+    results["timing"] = timing
     atomic_write_json(out_dir / "results.json", json_safe(results))
     if rerun_logger is not None:
         rerun_logger.close()
-    log.info("wrote %s (%d Gaussians) after %d steps in %.1f s", ply, results["train"]["num_gaussians"],
-             results["train"]["step"], results["train"]["seconds"])
+    log.info("wrote %s (%d Gaussians) after %d steps; timing %s", ply, results["train"]["num_gaussians"],
+             results["train"]["step"], {k: round(v, 1) for k, v in timing.items()})
     return results
 
 
