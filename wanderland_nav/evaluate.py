@@ -76,7 +76,14 @@ def run(cfg: DictConfig) -> EvaluationResult:
                        episodes_path=episodes, split=cfg.split, seed=int(cfg.seed))
     policy = resolve_policy(policy_cfg, env)
     name = str(policy_cfg["name"])
-    res = run_evaluation(env, policy, cfg.num_episodes, seed=int(cfg.seed), name=name, progress=bool(cfg.progress))
+    if cfg.get("save_rollouts"):  # rollout file for `python -m wanderland_nav.replay rollout=<file>`
+        from wanderland_nav.rollouts import record_evaluation
+
+        res, _ = record_evaluation(env, policy, cfg.save_rollouts, num_episodes=cfg.num_episodes, seed=int(cfg.seed),
+                                   name=name, frames=bool(cfg.get("save_frames", False)), progress=bool(cfg.progress))
+        print(f"wrote rollouts to {cfg.save_rollouts}")
+    else:
+        res = run_evaluation(env, policy, cfg.num_episodes, seed=int(cfg.seed), name=name, progress=bool(cfg.progress))
     print(f"{scene.name}: {len(res.records)} episodes (split {cfg.split}), policy {name}")
     print(res.table, flush=True)
     out = Path(cfg.out) if cfg.out is not None else _hydra_output_dir()

@@ -68,7 +68,7 @@ def run(cfg: DictConfig) -> dict:
         rollout = expert_rollout(episodes, scene.nav_from_scene, up_axis=scene.up_axis,
                                  camera=OmegaConf.to_container(cfg.camera, resolve=True),
                                  control_period=float(cfg.control_period), num_waypoints=int(cfg.num_waypoints),
-                                 K=camera_intrinsics(cam).numpy())
+                                 K=camera_intrinsics(cam).numpy(), stride=int(cfg.path_stride))
     elif episodes:
         used = set(rollout.episode_ids[rollout.episode_index.reshape(-1)].tolist())
         episodes = [e for e in episodes if str(e.episode_id) in used]

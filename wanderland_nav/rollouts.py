@@ -303,18 +303,23 @@ class RecordingEnv:
         return ms
 
 
-def record_evaluation(env, policy, path: str | Path, *, num_episodes: int | None = None, seed: int = 0,
-                      name: str = "policy", frames: bool = False, progress: bool = False):
-    """`run_evaluation` with every transition recorded and saved to `path` (the `save_rollouts=` hook).
+def record_evaluation(env, policy, path: str | Path | None, *, num_episodes: int | None = None, seed: int = 0,
+                      name: str = "policy", frames: bool = False, progress: bool = False, logger=None,
+                      step: int = 0):
+    """`run_evaluation` with every transition recorded (the `save_rollouts=` hook of evaluate/train).
 
-    Returns `(EvaluationResult, Rollout)`.
+    path: where to save the rollout (None: don't); logger: also handed the rollout
+    (`logger.log_rollout(rollout, step, tag=name)`, e.g. `RerunLogger`). Returns `(EvaluationResult, Rollout)`.
     """
     from wanderland_nav.envs.evaluation import run_evaluation
 
     rec = RolloutRecorder(env, frames=frames, policy=name)
     res = run_evaluation(RecordingEnv(env, rec), policy, num_episodes, seed=seed, name=name, progress=progress)
     ro = rec.rollout()
-    save_rollout(path, ro)
+    if path is not None:
+        save_rollout(path, ro)
+    if logger is not None:
+        logger.log_rollout(ro, step, tag=name)
     return res, ro
 
 
@@ -363,19 +368,23 @@ def render_rollout_frames(meta: RolloutMeta, gaussians, *, device: str = "cpu", 
 
 
 def expert_rollout(episodes, nav_from_scene: np.ndarray, *, up_axis: str, camera: dict | None = None,
-                   control_period: float = 0.5, num_waypoints: int = 5, K=None) -> Rollout:
+                   control_period: float = 0.5, num_waypoints: int = 5, K=None, stride: int = 1) -> Rollout:
     """The episodes' expert paths as a one-agent `Rollout`, played one after another.
 
     Each episode contributes its `gt_locations` (dense surface samples, scene frame) as poses; the
     heading at a sample looks toward the next one (the last keeps the previous heading); the
     "predicted" waypoints are the next `num_waypoints` samples in the body frame (what a perfect
     waypoint policy outputs); `distance_to_goal` is the remaining length along the path.
-    Replay renders the camera along it, so a researcher sees what the expert saw.
+    Replay renders the camera along it, so a researcher sees what the expert saw. `stride` keeps
+    every n-th sample (and the last), for long paths or quick looks.
     """
+    if stride < 1:
+        raise ValueError(f"expert_rollout: stride must be >= 1, got {stride}")
     R_ns = np.asarray(nav_from_scene, np.float64)
     pos, yaw, nxt_pos, nxt_yaw, wps, dist, done, ep_idx, step = [], [], [], [], [], [], [], [], []
     for i, e in enumerate(episodes):  # per episode (not per sample): every line below is batched over its path
         p = np.asarray(e.gt_locations if len(e.gt_locations) >= 2 else e.reference_path, np.float64) @ R_ns.T  # [L, 3] nav
+        p = p[np.unique(np.r_[np.arange(0, len(p), stride), len(p) - 1])]
         if len(p) < 2:
             continue
         d = np.diff(p[:, :2], axis=0)  # [L-1, 2]

@@ -156,8 +156,17 @@ def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Pat
 
     policy.eval()
     t = time.perf_counter()
-    res = run_evaluation(eval_env, _Deterministic(policy, bool(cfg.eval.deterministic)), cfg.eval.episodes,
-                         seed=int(cfg.seed), name=name, progress=bool(cfg.progress))
+    actor = _Deterministic(policy, bool(cfg.eval.deterministic))
+    save_dir, wants = cfg.get("save_rollouts"), bool(getattr(logger, "wants_rollouts", False))
+    if save_dir or wants:  # rollout file (+save_rollouts=<dir>) and/or renders for logger=rerun
+        from wanderland_nav.rollouts import record_evaluation
+
+        path = Path(save_dir) / f"{name.replace('+', '_')}.npz" if save_dir else None
+        res, _ = record_evaluation(eval_env, actor, path, num_episodes=cfg.eval.episodes, seed=int(cfg.seed), name=name,
+                                   frames=wants, progress=bool(cfg.progress), logger=logger if wants else None, step=step)
+    else:
+        res = run_evaluation(eval_env, actor, cfg.eval.episodes, seed=int(cfg.seed), name=name,
+                             progress=bool(cfg.progress))
     results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t}
     atomic_write_json(results_path, results)
     o = res.summary["overall"]

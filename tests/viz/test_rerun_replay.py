@@ -29,27 +29,28 @@ def demo(prepared_demo_scene, demo_episodes):
 
     scene = load_scene(prepared_demo_scene)
     g = Gaussians.load(scene.gaussians_path)
-    idx = torch.randperm(len(g), generator=torch.Generator().manual_seed(0))[:2000]
+    idx = torch.randperm(len(g), generator=torch.Generator().manual_seed(0))[:1000]
     return scene, NavMesh.load(scene.navmesh_path), g[idx]
 
 
-def _env(demo, B=2, max_steps=6, depth=False):
+@pytest.fixture(scope="module")
+def env(demo):
+    """2 agents, a 24 x 24 camera with depth, episodes cut at 4 steps (the CPU renderer is the cost)."""
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
 
     scene, navmesh, g = demo
     c = NavEnvConfig()
-    c.camera.width, c.camera.height, c.camera.history, c.camera.depth = W, H, 1, depth
-    c.termination.max_steps = max_steps
-    return make_nav_env(scene, config=c, batch_size=B, navmesh=navmesh, gaussians=g)
+    c.camera.width, c.camera.height, c.camera.history, c.camera.depth = W, H, 1, True
+    c.termination.max_steps = 4
+    return make_nav_env(scene, config=c, batch_size=2, navmesh=navmesh, gaussians=g)
 
 
 @pytest.fixture(scope="module")
-def recorded(demo, tmp_path_factory):
-    """3 expert episodes on 2 agents with frames and depth, saved and loaded back."""
+def recorded(env, tmp_path_factory):
+    """3 expert episodes on 2 agents with frames and depth, saved (loaded back by the tests)."""
     from wanderland_nav.envs import ExpertPolicy
 
-    env = _env(demo, depth=True)
     path = tmp_path_factory.mktemp("ro") / "expert.npz"
     res, ro = record_evaluation(env, ExpertPolicy(env), path, num_episodes=3, name="expert", frames=True)
     return env, res, ro, path
@@ -178,7 +179,7 @@ def test_replay_entry_point_rerenders_frames_and_expert_paths(recorded, demo, tm
                                            "agents=[0]", "max_points=500", "max_cameras=2"])
         replay.run(cfg)
         cfg2 = compose("replay", overrides=[f"episodes={env.scene.episodes_path}", f"out={tmp_path / 'b.rrd'}",
-                                            "max_gaussians=1500", "max_episodes=1", "camera.width=16",
+                                            "max_gaussians=1500", "max_episodes=1", "camera.width=16", "path_stride=8",
                                             "camera.height=12", "max_points=500", "max_cameras=2"])
         replay.run(cfg2)
     a = _chunks(tmp_path / "a.rrd")
@@ -189,7 +190,8 @@ def test_replay_entry_point_rerenders_frames_and_expert_paths(recorded, demo, tm
     b = _chunks(tmp_path / "b.rrd")
     ep = env.episodes[0]
     bimgs = _rows_by_entity(b, "Image:buffer", "step")["world/agents/agent_0/camera"]
-    assert len(bimgs) == len(ep.gt_locations) - 1 and len(bimgs[0][1][0]) == 16 * 12 * 3
+    n_samples = len(np.unique(np.r_[np.arange(0, len(ep.gt_locations), 8), len(ep.gt_locations) - 1]))
+    assert len(bimgs) == n_samples - 1 and len(bimgs[0][1][0]) == 16 * 12 * 3
     wps = _rows_by_entity(b, "Points3D:positions", "step")["world/agents/agent_0/waypoints"]
     first = np.asarray(sorted(wps, key=lambda r: r[0])[0][1])
     assert first.shape == (5, 3) and first[0, 0] > 0 and abs(first[0, 1]) < 1e-4  # next sample dead ahead
@@ -217,7 +219,7 @@ def test_rerun_logger_protocol(recorded, tmp_path):
     assert "rollouts/eval/agents/agent_1" not in poses
 
 
-def test_recorder_from_env_steps_and_tensordict(demo):
+def test_recorder_from_env_steps_and_tensordict(env, recorded):
     """`RolloutRecorder.add` fed by hand equals `rollout_from_tensordict` of the same steps stacked [B, T]."""
     from tensordict import TensorDict  # noqa: F401  (stack below)
     import torch as th
@@ -225,17 +227,19 @@ def test_recorder_from_env_steps_and_tensordict(demo):
     from wanderland_nav.envs import ExpertPolicy
     from wanderland_nav.rollouts import rollout_from_tensordict
 
-    env = _env(demo, B=2, max_steps=4)
-    env.config.camera.enabled = False
     pol = ExpertPolicy(env)
     rec = RolloutRecorder(env)
     renv = RecordingEnv(env, rec)
-    td = renv.reset()
-    steps = []
-    for _ in range(5):
-        td = pol(td)
-        full, td = renv.step_and_maybe_reset(td)
-        steps.append(full)
+    env.config.camera.enabled = False  # blind: this test is about the bookkeeping
+    try:
+        td = renv.reset()
+        steps = []
+        for _ in range(5):
+            td = pol(td)
+            full, td = renv.step_and_maybe_reset(td)
+            steps.append(full)
+    finally:
+        env.config.camera.enabled = True
     ro = rec.rollout()
     ro2 = rollout_from_tensordict(th.stack(steps, 1))
     np.testing.assert_array_equal(ro.position, ro2.position)

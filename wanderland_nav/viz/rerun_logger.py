@@ -53,6 +53,11 @@ class RerunLogger:
         self._rollout_calls = 0
         self.rollouts_logged = 0
 
+    @property
+    def wants_rollouts(self) -> bool:
+        """Whether the trainer should record eval rollouts (with frames) for this logger."""
+        return self.rollout_every > 0
+
     def log_scalars(self, scalars: dict[str, float], step: int) -> None:
         """Each `group/name` scalar becomes the time series entity `group/name` on timeline `step`."""
         self.rec.set_time("step", sequence=int(step))
