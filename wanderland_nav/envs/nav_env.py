@@ -113,7 +113,7 @@ class NavEnv(EnvBase):
         E = len(self.table)
         if mode == "render":
             imgs, _ = self.camera.render(self.table.goal_position, self.table.goal_yaw)
-            has = torch.ones(E, dtype=torch.bool, device=self.device)
+            has = torch.full((E,), c.enabled, dtype=torch.bool, device=self.device)  # no camera, no goal view
         elif mode == "auto":
             ep_path = getattr(self.scene, "episodes_path", None)
             roots = roots + [Path(p) for p in (ep_path and Path(ep_path).parent, getattr(self.scene, "root", None)) if p]
@@ -229,7 +229,7 @@ class NavEnv(EnvBase):
         self._collisions = self._collisions + collided.long()
         self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
         t2 = time.perf_counter()
-        rgb, depth = self.camera.render(end, plan_yaw)
+        rgb, depth = self.camera.render(end, plan_yaw) if cfg.camera.enabled else (None, None)
         t3 = time.perf_counter()
         self._push_frame(rgb, depth, end)
         terminated = success | intervention
@@ -273,17 +273,19 @@ class NavEnv(EnvBase):
         serial = self._cursor + torch.arange(n, device=self.device)
         self._cursor += n
         pos, yaw = self.table.start_position[ep], self.table.start_yaw[ep]
-        t0 = time.perf_counter()
-        rgb, depth = self.camera.render(pos, yaw)
-        self.timings["reset_render"] += time.perf_counter() - t0
+        if self.config.camera.enabled:  # disabled: the frame history stays all zeros
+            t0 = time.perf_counter()
+            rgb, depth = self.camera.render(pos, yaw)
+            self.timings["reset_render"] += time.perf_counter() - t0
         d0 = self.shortest_length[ep]
         put = lambda state, new: state.index_copy(0, idx, new.to(state.dtype))  # noqa: E731
         zl = torch.zeros(n, dtype=torch.long, device=self.device)
         self._ep, self._serial, self._steps = put(self._ep, ep), put(self._serial, serial), put(self._steps, zl)
         self._pos, self._yaw, self._dist = put(self._pos, pos), put(self._yaw, yaw), put(self._dist, d0)
-        self._rgb = put(self._rgb, rgb.unsqueeze(1).expand(n, T, *rgb.shape[1:]))
-        if self._depth is not None:
-            self._depth = put(self._depth, depth.unsqueeze(1).expand(n, T, *depth.shape[1:]))
+        if self.config.camera.enabled:
+            self._rgb = put(self._rgb, rgb.unsqueeze(1).expand(n, T, *rgb.shape[1:]))
+            if self._depth is not None:
+                self._depth = put(self._depth, depth.unsqueeze(1).expand(n, T, *depth.shape[1:]))
         self._pos_hist = put(self._pos_hist, pos.unsqueeze(1).expand(n, T, 3))
         p = self._progress
         self._progress = ProgressState(put(p.best_distance, d0), put(p.steps_without_progress, zl), put(p.stuck_steps, zl))

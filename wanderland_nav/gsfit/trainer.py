@@ -399,7 +399,7 @@ class Trainer:
         return self.checkpoint_path
 
     def load_checkpoint(self, path: Path) -> None:
-        blob = torch.load(path, map_location=self.device, weights_only=False)
+        blob = torch.load(path, map_location=self.device, weights_only=True)
         try:
             params = blob["params"]
             for k in PARAM_NAMES:

@@ -67,10 +67,12 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 def load_policy_weights(policy: torch.nn.Module, path: str | Path) -> dict[str, Any]:
     """Load only the policy weights (warm start from a BC checkpoint); strict, with a clear error."""
     ckpt = load_checkpoint(path)
-    missing, unexpected = policy.load_state_dict(ckpt["policy"], strict=False)
-    if missing or unexpected:
-        raise KeyError(f"{path}: policy state dict mismatch (wrong policy or config?): "
-                       f"missing={missing[:6]} unexpected={unexpected[:6]}")
+    try:
+        policy.load_state_dict(ckpt["policy"], strict=True)
+    except RuntimeError as e:  # missing/unexpected keys or shape mismatches
+        first = str(e).strip().splitlines()[1:3]
+        raise ValueError(f"{path}: checkpoint does not fit {type(policy).__name__} (wrong policy or config?): "
+                         f"{' '.join(s.strip() for s in first)}") from None
     return ckpt
 
 

@@ -53,6 +53,7 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
+    freeze_encoder: bool = True        # the paper updates only the policy: image encoders stay fixed in RL
 
     def __post_init__(self):
         if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
@@ -126,6 +127,8 @@ class PPOTrainer:
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
+        if cfg.freeze_encoder:
+            policy.freeze_encoders(True)
         self.actor = make_actor(policy)
         self.critic = ValueModule(policy)
         self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=cfg.clip_epsilon,
@@ -183,9 +186,11 @@ class PPOTrainer:
                 stats = {
                     "losses/objective": out["loss_objective"], "losses/critic": out["loss_critic"],
                     "losses/approx_kl": out["kl_approx"], "losses/clipfrac": out["clip_fraction"],
-                    "losses/explained_variance": out.get("explained_variance", torch.tensor(float("nan"))),
-                    "losses/entropy": out.get("entropy", torch.tensor(float("nan"))), "losses/grad_norm": gn,
+                    "losses/grad_norm": gn,
                 }
+                for key, name in (("explained_variance", "explained_variance"), ("entropy", "entropy")):
+                    if key in out.keys():
+                        stats[f"losses/{name}"] = out[key]
                 for k, v in stats.items():
                     sums[k] = sums.get(k, 0.0) + float(torch.as_tensor(v).detach().float().mean())
                 count += 1
@@ -229,6 +234,7 @@ class PPOTrainer:
                               "time/collect_fps": batch.numel() / max(dt_collect, 1e-9),
                               "train/frames": self.frames, "train/iteration": self.iteration})
                 self.logger.log_scalars(stats, self.frames)
+                self.logger.log_rollout(batch, self.frames, tag="train")   # [B, T] transitions
                 self.save("ppo" if self.frames + cfg.frames_per_batch <= cfg.total_frames else "ppo_done")
                 pbar.update(batch.numel())
                 pbar.set_postfix({k.split("/")[1]: f"{stats[k]:.3g}" for k in
