@@ -1,9 +1,10 @@
 """Exact shortest paths and batched geodesic distances (see visibility.py for why it is exact).
 
-Every query batch does: snap the endpoints, one walk s->g per pair (direct visibility), then for
-pairs that are not directly visible one walk from each endpoint to every tangent corner of its
-island, and a min-plus product with the corner distance matrix D. All of it is batched torch;
-the Python loop is only over chunks of pairs.
+A query batch: snap the endpoints; one line-of-sight test s->g per pair; for pairs that are not
+directly visible, test which tangent corners of its island each endpoint sees (one lookup in each
+corner's visibility polygon, or a triangle walk on islands with overlapping levels), then a
+min-plus product with the corner distance matrix D over the seen corners. All of it is batched
+torch; Python loops only run over chunks of pairs (sized to bound memory).
 """
 
 from __future__ import annotations
