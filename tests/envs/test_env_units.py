@@ -138,3 +138,41 @@ def test_spl_and_aggregation_by_environment():
     assert set(aggregate_metrics([_m(0, True, 0.1, 1, 1)])) == {"overall"}  # no labels, no split
     table = format_table({"expert/overall": agg["overall"]})
     assert "SPL" in table.splitlines()[0] and "0.600" in table
+
+
+# ---------------------------------------------------------------- camera
+
+
+def test_intrinsics_and_camera_looks_along_the_heading():
+    import numpy as np
+
+    from wanderland_nav.envs.camera import AgentCamera, camera_intrinsics
+    from wanderland_nav.envs.config import CameraConfig
+    from wanderland_nav.geometry import nav_from_scene_rotation
+
+    K = camera_intrinsics(CameraConfig(width=64, height=48, hfov_deg=90.0))
+    assert torch.allclose(K, torch.tensor([[32.0, 0, 32], [0, 32.0, 24], [0, 0, 1]]))
+    Kf = camera_intrinsics(CameraConfig(width=64, height=48, hfov_deg=180.0, camera_model="fisheye"))
+    assert Kf[0, 0] == pytest.approx(32.0 / (math.pi / 2))  # equidistant: the image edge is 90 deg off-axis
+
+    R_ns = nav_from_scene_rotation("-y")
+    cfg = CameraConfig(width=64, height=48, mount_height=1.5, pitch_deg=20.0)
+    cam = AgentCamera(cfg, R_ns, renderer=None, gaussians=None, device="cpu")
+    pos = torch.tensor([[2.0, -1.0, 0.3], [0.0, 0.0, 0.0]])
+    yaw = torch.tensor([0.7, -2.0])
+    d = 4.0  # a point on the optical axis, d metres ahead along the heading, below by d * tan(pitch)
+    ahead = torch.stack([torch.cos(yaw), torch.sin(yaw), torch.zeros(2)], -1) * d
+    target_nav = pos + ahead + torch.tensor([0.0, 0.0, 1.5 - d * math.tan(math.radians(20.0))])
+    target_scene = target_nav @ torch.as_tensor(R_ns, dtype=torch.float32)  # row form of R_sn @ p
+    V = cam.cam_from_world(pos, yaw)
+    p_cam = (V[:, :3, :3] @ target_scene[..., None])[..., 0] + V[:, :3, 3]
+    assert torch.all(p_cam[:, 2] > 0)
+    uv = (K @ p_cam[..., None])[..., 0]
+    uv = uv[:, :2] / uv[:, 2:]
+    assert torch.allclose(uv, torch.tensor([[32.0, 24.0]] * 2), atol=1e-3)
+    # a point to the agent's left lands left of the centre (OpenCV u grows to the right)
+    left = pos + torch.stack([-torch.sin(yaw), torch.cos(yaw), torch.zeros(2)], -1) + ahead
+    left[:, 2] += 1.5 - d * math.tan(math.radians(20.0))
+    pl = (V[:, :3, :3] @ (left @ torch.as_tensor(R_ns, dtype=torch.float32))[..., None])[..., 0] + V[:, :3, 3]
+    assert torch.all(pl[:, 0] / pl[:, 2] < 0)
+    assert np.isfinite(V.numpy()).all()

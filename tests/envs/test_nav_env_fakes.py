@@ -224,3 +224,13 @@ def test_bad_inputs_are_named():
     td[keys.ACTION] = torch.zeros(1, 2)  # a velocity command sent to a waypoint env
     with pytest.raises(ValueError, match=r"waypoint action must be \[B, K, 2\]"):
         env.step(td)
+
+
+def test_disabled_camera_never_renders_and_emits_zeros():
+    c = small_config()
+    c.camera.enabled = False
+    renderer = FakeRenderer()
+    env = NavEnv(FakeScene(), make_episodes(), batch_size=[2], config=c, navmesh=FakeNavMesh(), renderer=renderer)
+    check_env_specs(env)
+    td = env.rollout(5, ExpertPolicy(env), break_when_any_done=False)
+    assert renderer.calls == [] and not td["next", keys.RGB].any()
