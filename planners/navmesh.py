@@ -24,13 +24,13 @@ import torch
 
 from planners.heightfield import build_compact
 from planners.polygons import build_trimesh
-from planners.settings import NavMeshSettings, OffMeshError
+from planners.settings import FORMAT_VERSION, NavMeshSettings, OffMeshError
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
 from planners.walk import closest_point_on_tris, point_in_tri
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.geometry import nav_from_scene_rotation
 
-FORMAT_VERSION = 1
+SNAP_INSET = 1e-4  # m: snapped points move this far into their triangle (clear of walls for visibility tests)
 
 
 @dataclass
@@ -401,11 +401,11 @@ class NavMesh:
                 d2 = ((cp - q[:, None, :2]) ** 2).sum(-1) + (q[:, None, 2] - zt) ** 2
                 j = d2.argmin(1)
                 tri[m] = j
-                # nudge 1e-6 m towards the centroid so the point is strictly inside (clean line-of-sight tests)
+                # nudge SNAP_INSET towards the centroid so the point is strictly inside (clean line-of-sight tests)
                 c = txy[j].mean(1)
                 cpj = cp[torch.arange(m.shape[0]), j]
                 v = c - cpj
-                xy[m] = cpj + 1e-6 * v / v.norm(dim=1, keepdim=True).clamp_min(1e-12)
+                xy[m] = cpj + SNAP_INSET * v / v.norm(dim=1, keepdim=True).clamp_min(1e-12)
                 dist[m] = d2[torch.arange(m.shape[0]), j].sqrt()
         elif miss.shape[0]:
             dist[miss] = float("inf")

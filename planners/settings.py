@@ -15,6 +15,11 @@ from dataclasses import dataclass
 from wanderland_nav.geometry import parse_up_axis
 
 
+# Version of the baked navmesh layout (navmesh.npz); part of `bake_hash` so caches and scene
+# preparation rebake when it changes. 2: visibility-polygon keys spaced by 32 per corner.
+FORMAT_VERSION = 2
+
+
 class OffMeshError(ValueError):
     """A query point lies farther from the navmesh than the allowed snap distance."""
 
@@ -89,4 +94,5 @@ class NavMeshSettings:
         """Hash of the fields that change the baked mesh (snap_distance is query-time only)."""
         d = self.to_dict()
         d.pop("snap_distance")
+        d["format_version"] = FORMAT_VERSION
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
