@@ -24,12 +24,17 @@ from wanderland_nav.rollouts import expert_rollout, load_rollout, render_rollout
 
 
 def _load_gaussians(scene, max_gaussians):
+    """The scene's Gaussians, or training's level-of-detail subset (same selection as `render.max_gaussians`)."""
     if scene is None or scene.gaussians_path is None or not Path(scene.gaussians_path).is_file():
         return None
     if max_gaussians is not None:
-        from wanderland_nav.train import render_gaussians  # the same level-of-detail subset training renders
+        try:
+            from wanderland_nav.rl.policy_env import lod_gaussians
+        except ImportError:  # older trainer layout: the helper lived in train.py
+            from wanderland_nav.train import render_gaussians
 
-        return render_gaussians(scene, int(max_gaussians))
+            return render_gaussians(scene, int(max_gaussians))
+        return lod_gaussians(scene.gaussians_path, int(max_gaussians))
     from wanderland_nav.render import Gaussians
 
     return Gaussians.load(scene.gaussians_path)
@@ -89,7 +94,7 @@ def run(cfg: DictConfig) -> dict:
     out = Path(cfg.out) if cfg.out is not None else src.with_suffix(".rrd")
     agents = list(cfg.agents) if cfg.agents is not None else None
     counts = write_recording(out, scene=scene, rollout=rollout, episodes=episodes, frames=frames, agents=agents,
-                             max_points=int(cfg.max_points), max_cameras=int(cfg.max_cameras))
+                             max_points=int(cfg.max_points), max_cameras=int(cfg.max_cameras), frame_chunk=int(cfg.frame_chunk))
     print(f"wrote {out} ({rollout.num_steps} steps x {rollout.num_agents} agents, {len(episodes)} episodes, "
           f"{time.perf_counter() - t0:.1f}s)")
     if cfg.viewer:

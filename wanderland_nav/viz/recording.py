@@ -25,7 +25,7 @@ from wanderland_nav.viz.rerun_scene import log_scene
 def write_recording(out: str | Path, *, scene=None, rollout: Rollout | None = None, episodes=None,
                     frames: FrameSource | None = None, agents: list[int] | None = None, navmesh=None,
                     max_points: int = 50_000, max_cameras: int = 32, application_id: str = "wanderland_nav",
-                    recording_id: str | None = None) -> dict:
+                    recording_id: str | None = None, frame_chunk: int = 64) -> dict:
     """Log what is given into `out` and return counts of what was logged."""
     out = Path(out)
     if out.suffix != ".rrd":
@@ -42,7 +42,7 @@ def write_recording(out: str | Path, *, scene=None, rollout: Rollout | None = No
                 up = scene.up_axis if scene is not None else (rollout.meta.up_axis if rollout is not None else "+z")
                 counts["episodes"] = log_episodes(rec, episodes, up)
             if rollout is not None:
-                counts["rollout"] = log_rollout(rec, rollout, frames=frames, agents=agents)
+                counts["rollout"] = log_rollout(rec, rollout, frames=frames, agents=agents, frame_chunk=frame_chunk)
         finally:
             rec.flush()
             rec.disconnect()  # footer written, file complete before the rename

@@ -81,7 +81,7 @@ def _image_format(h: int, w: int, channels: int, dtype: str):
 def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSource | None = None,
                 prefix: str = "world", plots_prefix: str = "plots", agents: list[int] | None = None,
                 step_offset: int = 0, log_frames: bool = True, view_coords: bool = True,
-                timeline: str = "step", fixed_times: dict[str, int] | None = None) -> dict:
+                timeline: str = "step", fixed_times: dict[str, int] | None = None, frame_chunk: int = 64) -> dict:
     """Log `rollout` (see the module docstring for entities). Returns counts (`steps`, `agents`, `episodes`).
 
     frames: renders the frames when `rollout.rgb` is None (replay re-renders from the splats); with
@@ -90,6 +90,8 @@ def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSourc
     step_offset: added to the step timeline.
     timeline / fixed_times: name of the per-step timeline, and other timelines held constant for this
         rollout (the training logger logs eval rollouts on `rollout_step` at a fixed training `step`).
+    frame_chunk: steps rendered (and sent) per batch when frames are re-rendered; bounds the memory
+        held for frames to `frame_chunk * len(agents)` images instead of the whole rollout.
     """
     fixed = dict(fixed_times or {})
     T, B = rollout.num_steps, rollout.num_agents
@@ -100,15 +102,6 @@ def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSourc
         rec.log(prefix, view_coordinates(meta.up_axis), static=True)
     trans, rot = body_poses_scene(rollout.position.astype(np.float64), rollout.yaw.astype(np.float64),
                                   np.asarray(meta.nav_from_scene))  # [T, B, 3], [T, B, 3, 3]
-    rgb, depth = rollout.rgb, rollout.depth
-    if log_frames and rgb is None and frames is not None:
-        sel = np.asarray(agents)
-        r, d = frames(rollout.position[:, sel].reshape(-1, 3), rollout.yaw[:, sel].reshape(-1))
-        rgb = np.zeros((T, B, *r.shape[1:]), np.uint8)
-        rgb[:, sel] = r.reshape(T, len(sel), *r.shape[1:])
-        if d is not None:
-            depth = np.zeros((T, B, *d.shape[1:]), np.float32)
-            depth[:, sel] = d.reshape(T, len(sel), *d.shape[1:])
     cam = meta.camera or {}
     K = np.asarray(meta.K, np.float64) if meta.K is not None else None
     body_T_cam = body_from_camera(cam.get("mount_height", 1.2), cam.get("pitch_deg", 0.0))
@@ -124,19 +117,6 @@ def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSourc
             rec.log(f"{base}/camera", rr.Pinhole(image_from_camera=K.astype(np.float32), resolution=[w, h],
                                                  camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.4),
                     static=True)
-        if log_frames and rgb is not None:
-            H, W = rgb.shape[2:4]
-            rec.log(f"{base}/camera", rr.Image.from_fields(format=_image_format(H, W, 3, "U8")), static=True)
-            rr.send_columns(f"{base}/camera", indexes=idx,
-                            columns=rr.Image.columns(buffer=np.ascontiguousarray(rgb[:, b]).reshape(T, -1)),
-                            recording=rec)
-        if log_frames and depth is not None:
-            H, W = depth.shape[2:4]
-            rec.log(f"{base}/camera/depth", rr.DepthImage.from_fields(format=_image_format(H, W, 1, "F32"), meter=1.0),
-                    static=True)
-            rr.send_columns(f"{base}/camera/depth", indexes=idx,
-                            columns=rr.DepthImage.columns(buffer=np.ascontiguousarray(depth[:, b], np.float32)
-                                                          .reshape(T, -1)), recording=rec)
         wp = rollout.waypoints[:, b]  # [T, K, 2] body frame
         if wp.shape[1]:
             K_wp = wp.shape[1]
@@ -148,10 +128,48 @@ def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSourc
             rr.send_columns(f"{plots_prefix}/{name}/agent_{b}", indexes=idx,
                             columns=rr.Scalars.columns(scalars=getattr(rollout, name)[:, b].astype(np.float64)),
                             recording=rec)
+    if log_frames:
+        _log_frames(rec, rollout, frames, agents, prefix, step_offset, dt, timeline, fixed, frame_chunk)
     n_ep = _log_trajectories(rec, rollout, trans, agents, prefix, step_offset, dt, timeline, fixed)
     _log_episode_metrics(rec, rollout, agents, plots_prefix, step_offset, dt, timeline, fixed)
     rec.reset_time()  # later logs on this stream must not inherit the last step's time
     return {"steps": T, "agents": len(agents), "episodes": n_ep}
+
+
+def _log_frames(rec, rollout: Rollout, frames: FrameSource | None, agents, prefix, t0, dt, timeline, fixed,
+                frame_chunk: int) -> None:
+    """Camera images (and depth) per agent: the stored frames, or `frames(...)` renders, sent in chunks
+    of `frame_chunk` steps (one `send_columns` per agent and chunk)."""
+    T = rollout.num_steps
+    if rollout.rgb is None and frames is None:
+        return
+    sel = np.asarray(agents)
+    formats_sent = False
+    for s in range(0, T, max(1, int(frame_chunk))):
+        e = min(T, s + max(1, int(frame_chunk)))
+        if rollout.rgb is not None:
+            rgb = rollout.rgb[s:e][:, sel]  # [t, A, H, W, 3]
+            depth = None if rollout.depth is None else rollout.depth[s:e][:, sel]
+        else:
+            r, d = frames(rollout.position[s:e][:, sel].reshape(-1, 3), rollout.yaw[s:e][:, sel].reshape(-1))
+            rgb = r.reshape(e - s, len(sel), *r.shape[1:])
+            depth = None if d is None else d.reshape(e - s, len(sel), *d.shape[1:])
+        idx = _times(np.arange(t0 + s, t0 + e), dt, timeline, fixed)
+        H, W = rgb.shape[2:4]
+        for i, b in enumerate(agents):
+            base = f"{prefix}/agents/agent_{b}/camera"
+            if not formats_sent:
+                rec.log(base, rr.Image.from_fields(format=_image_format(H, W, 3, "U8")), static=True)
+                if depth is not None:
+                    rec.log(f"{base}/depth", rr.DepthImage.from_fields(format=_image_format(H, W, 1, "F32"),
+                                                                       meter=1.0), static=True)
+            rr.send_columns(base, indexes=idx, recording=rec,
+                            columns=rr.Image.columns(buffer=np.ascontiguousarray(rgb[:, i]).reshape(e - s, -1)))
+            if depth is not None:
+                rr.send_columns(f"{base}/depth", indexes=idx, recording=rec,
+                                columns=rr.DepthImage.columns(buffer=np.ascontiguousarray(depth[:, i], np.float32)
+                                                              .reshape(e - s, -1)))
+        formats_sent = True
 
 
 def _log_trajectories(rec, rollout: Rollout, trans: np.ndarray, agents, prefix, t0, dt, timeline, fixed) -> int:
