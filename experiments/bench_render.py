@@ -124,9 +124,9 @@ def _child(cfg: dict) -> dict:
     evals = [0]
     orig = R._alpha_raw
 
-    def counting(feat, q):
-        evals[0] += feat.shape[0] * q.shape[1] * q.shape[2]
-        return orig(feat, q)
+    def counting(geo, q):
+        evals[0] += geo.P * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
+        return orig(geo, q)
 
     R._alpha_raw = counting
     fn = _baseline if cfg["impl"] == "baseline" else rasterization

@@ -61,6 +61,7 @@ def rasterization(
     thin_prism_coeffs: torch.Tensor | None = None,
     *,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
+    schedule: str = "auto",
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Render N Gaussians into C cameras with gsplat 1.5 semantics (see `rasterize.py`).
 
@@ -139,7 +140,7 @@ def rasterization(
 
     render_colors, render_alphas = rasterize_to_pixels(
         proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, int(width), int(height),
-        tile_size=tile_size, chunk_elems=chunk_elems)
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule)
     if bgs is not None:
         render_colors = render_colors + (1.0 - render_alphas) * bgs[:, None, None, :]
     if render_mode in ("ED", "RGB+ED"):

@@ -190,18 +190,58 @@ class _Plan:
         self.min_chunk = min_chunk
         self.pixels = pixels
 
-    def chunk_len(self, tiles_h: np.ndarray, consumed: int) -> int:
-        remaining = int(self.counts[tiles_h].max()) - consumed
-        cap = max(self.min_chunk, self.chunk_elems // (len(tiles_h) * self.pixels))
-        return max(1, min(remaining, cap))
 
-    def entries(self, tiles_h: np.ndarray, consumed: int, L: int, device):
-        """Entry positions j [Ta, L] (clamped into range) and their validity mask."""
-        starts = torch.as_tensor(self.starts[tiles_h] + consumed, device=device)
-        ends = torch.as_tensor(self.starts[tiles_h] + self.counts[tiles_h], device=device)
-        j = starts[:, None] + torch.arange(L, device=device)[None, :]
-        valid = j < ends[:, None]
-        return j.clamp_(max=max(int(self.starts[-1] + self.counts[-1]) - 1, 0)), valid
+
+class _Cursor:
+    """Walks one tile group chunk by chunk; the same schedule in forward and backward.
+
+    CPU (`compact=True`): tiles leave the active set as soon as their list is exhausted or all their
+    pixels terminated, and the chunk length grows as the set shrinks (host checks are free there).
+    GPU (`compact=False`): fixed chunk length and masks only, so the loop issues no host syncs.
+    """
+
+    def __init__(self, plan: _Plan, tiles_h: np.ndarray, device, compact: bool):
+        self.plan, self.compact = plan, compact
+        self.counts_h = plan.counts[tiles_h]
+        self.max_count = int(self.counts_h.max())
+        self.starts = torch.as_tensor(plan.starts[tiles_h], device=device)
+        self.ends = self.starts + torch.as_tensor(self.counts_h, device=device)
+        self.n_entries = max(int(plan.starts[-1] + plan.counts[-1]), 1)
+        self.device = device
+        self.consumed = 0
+        self.fixed_len = max(plan.min_chunk, plan.chunk_elems // (len(tiles_h) * plan.pixels))
+
+    @property
+    def active(self) -> int:
+        return len(self.counts_h)
+
+    def more(self) -> bool:
+        return self.active > 0 and self.consumed < self.max_count
+
+    def next_chunk(self):
+        """(L, j [Ta, L] entry positions clamped into range, valid [Ta, L])."""
+        if self.compact:
+            cap = max(self.plan.min_chunk, self.plan.chunk_elems // (self.active * self.plan.pixels))
+            L = max(1, min(int(self.counts_h.max()) - self.consumed, cap))
+        else:
+            L = self.fixed_len
+        j = self.starts[:, None] + (self.consumed + torch.arange(L, device=self.device))[None, :]
+        valid = j < self.ends[:, None]
+        return L, j.clamp_(max=self.n_entries - 1), valid
+
+    def advance(self, L: int, T: torch.Tensor):
+        """Consume L entries; returns (kept, gone) device index tensors when the active set shrinks."""
+        self.consumed += L
+        if not self.compact:
+            return None, None
+        keep = (self.counts_h > self.consumed) & (T > 0).any(0).cpu().numpy()
+        if keep.all():
+            return None, None
+        kept = torch.as_tensor(np.nonzero(keep)[0], device=self.device)
+        gone = torch.as_tensor(np.nonzero(~keep)[0], device=self.device)
+        self.counts_h = self.counts_h[keep]
+        self.starts, self.ends = self.starts[kept], self.ends[kept]
+        return kept, gone
 
 
 class _Tiles:
@@ -257,7 +297,7 @@ class _RasterizeFn(torch.autograd.Function):
     """acc [C,H,W,D+1] = sum_j w_j [c_j, 1] from visible-Gaussian rows; see module docstring."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems):
+    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
@@ -267,43 +307,37 @@ class _RasterizeFn(torch.autograd.Function):
         table = _table(means2d, conics, opacities, colors)
         th = _alpha_threshold(dtype)
         out = torch.zeros(C * geo.TH * geo.TW, geo.P, D + 1, dtype=dtype, device=dev)
-        on_cpu = dev.type == "cpu"
+        on_cpu = compact
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
             center = geo.centers(tiles)
             T = geo.in_image(tiles)  # [P, Ta]
             acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)  # [Ta, P, D+1]
-            consumed = 0
-            while len(tiles_h):
-                L = plan.chunk_len(tiles_h, consumed)
-                j, valid = plan.entries(tiles_h, consumed, L, dev)
-                rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(len(tiles_h), L, K)
+            cur = _Cursor(plan, tiles_h, dev, compact=on_cpu)
+            while cur.more():
+                L, j, valid = cur.next_chunk()
+                rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(cur.active, L, K)
                 q, _, _ = _quad_coefs(rows, center, valid)
                 alpha = _alpha_raw(geo, q).clamp_(max=ALPHA_MAX)
                 torch.nn.functional.threshold_(alpha, th, 0.0)
                 nT, w = _transmittance(alpha, T, check_termination=on_cpu)
                 acc.baddbmm_(w.permute(1, 0, 2), rows[..., 6:])
                 T = nT[:, :, -1]
-                consumed += L
-                keep = plan.counts[tiles_h] > consumed
-                if on_cpu:  # early stop of finished tiles (a free check on CPU; masks do it on GPU)
-                    keep &= (T > 0).any(0).numpy()
-                if not keep.all():
-                    gone = torch.as_tensor(np.nonzero(~keep)[0], device=dev)
+                kept, gone = cur.advance(L, T)
+                if kept is not None:
                     out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
-                    kept = torch.as_tensor(np.nonzero(keep)[0], device=dev)
-                    tiles_h = tiles_h[keep]
-                    tiles, center, acc = tiles[kept], center[kept], acc[kept]
-                    T = T.index_select(1, kept)
+                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(1, kept)
+            if cur.active:
+                out.index_copy_(0, tiles, acc)
         img = geo.to_image(out)
         ctx.save_for_backward(means2d, conics, opacities, colors, ent, counts, img)
-        ctx.cfg = (C, H, W, tile_size, chunk_elems)
+        ctx.cfg = (C, H, W, tile_size, chunk_elems, compact)
         return img
 
     @staticmethod
     def backward(ctx, g_img):
         means2d, conics, opacities, colors, ent, counts, img = ctx.saved_tensors
-        C, H, W, tile_size, chunk_elems = ctx.cfg
+        C, H, W, tile_size, chunk_elems, compact = ctx.cfg
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
         K = D + 7
@@ -314,7 +348,7 @@ class _RasterizeFn(torch.autograd.Function):
         g_tiles = geo.from_image(g_img.contiguous())  # [NT, P, D+1]
         total = (geo.from_image(img) * g_tiles).sum(-1)  # [NT, P] = sum_j w_j (c_j . g), per pixel
         g_rows = torch.zeros(K, V, dtype=dtype, device=dev)  # d/d(mx, my, a, b, c, log o, colours, 1)
-        on_cpu = dev.type == "cpu"
+        on_cpu = compact
         feat = geo.feat
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
@@ -322,11 +356,10 @@ class _RasterizeFn(torch.autograd.Function):
             T = geo.in_image(tiles)  # [P, Ta]
             gt = g_tiles.index_select(0, tiles)  # [Ta, P, D+1]
             rest0 = total.index_select(0, tiles).t().contiguous()  # [P, Ta] what lies behind so far
-            consumed = 0
-            while len(tiles_h):
-                Ta = len(tiles_h)
-                L = plan.chunk_len(tiles_h, consumed)
-                j, valid = plan.entries(tiles_h, consumed, L, dev)
+            cur = _Cursor(plan, tiles_h, dev, compact=on_cpu)
+            while cur.more():
+                Ta = cur.active
+                L, j, valid = cur.next_chunk()
                 e = ent.index_select(0, j.view(-1))
                 rows = table.index_select(0, e).view(Ta, L, K)
                 q, mx, my = _quad_coefs(rows, center, valid)
@@ -362,19 +395,14 @@ class _RasterizeFn(torch.autograd.Function):
                 upd.mul_(valid)
                 g_rows.index_add_(1, e, upd.view(K, Ta * L))
                 T = nT[:, :, -1]
-                consumed += L
-                keep = plan.counts[tiles_h] > consumed
-                if on_cpu:
-                    keep &= (T > 0).any(0).numpy()
-                if not keep.all():
-                    kept = torch.as_tensor(np.nonzero(keep)[0], device=dev)
-                    tiles_h = tiles_h[keep]
+                kept, _ = cur.advance(L, T)
+                if kept is not None:
                     center, gt = center[kept], gt[kept]
                     T, rest0 = T.index_select(1, kept), rest0.index_select(1, kept)
         o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
         g_rows = g_rows.t()
         return (g_rows[:, 0:2], g_rows[:, 2:5], g_rows[:, 5] / o_safe, g_rows[:, 6:6 + D],
-                None, None, None, None, None, None, None)
+                None, None, None, None, None, None, None, None)
 
 
 def rasterize_to_pixels(
@@ -389,13 +417,21 @@ def rasterize_to_pixels(
     *,
     tile_size: int = 16,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
+    schedule: str = "auto",
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Composite projected Gaussians: returns (colors [C,H,W,D], alphas [C,H,W,1]), no background."""
+    """Composite projected Gaussians: returns (colors [C,H,W,D], alphas [C,H,W,1]), no background.
+
+    schedule: "compact" (drop finished tiles, CPU default), "masked" (fixed chunks, no host syncs in
+    the loop, GPU default) or "auto". Both give the same image; "masked" is testable on CPU.
+    """
+    if schedule not in ("auto", "compact", "masked"):
+        raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
+    compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     C, N, D = colors.shape
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     vis, ent, counts = isect_tiles(means2d, radii, depths, tile_size, TW, TH)
     dtype = means2d.dtype
     sel = lambda t, k: t.reshape(C * N, k).index_select(0, vis)  # noqa: E731  visible rows (autograd-tracked)
     acc = _RasterizeFn.apply(sel(means2d, 2), sel(conics, 3), sel(opacities, 1)[:, 0], sel(colors.to(dtype), D),
-                             ent, counts, C, height, width, tile_size, chunk_elems)
+                             ent, counts, C, height, width, tile_size, chunk_elems, compact)
     return acc[..., :D], acc[..., D:]
