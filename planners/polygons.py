@@ -2,8 +2,8 @@
 
 Mirrors Recast's contour stage: each region's raw contour runs along cell corners; wall stretches
 are simplified to within `edge_max_error` cells (Douglas-Peucker, like rcBuildContours), portal
-stretches between two regions keep their exact staircase (only collinear points drop) so both
-sides share identical edges and the triangles can be stitched. Regions are split so that no two
+stretches between two regions keep every unit step so both sides share identical edges and the
+triangles can be stitched; a portal seen from one side only becomes a wall on both. Regions are split so that no two
 spans of one region share a column: then each region is a plain 2D polygon, and several levels
 (bridges, floors over lobbies) are separate regions joined by portal edges.
 
@@ -222,8 +222,12 @@ def _simplify_ring(pts: np.ndarray, lab: np.ndarray, tol: float, use_dp: bool):
         if cl == WALL and use_dp:
             sub = chain[_dp(chain, tol)]
             sub = sub[_drop_collinear(sub)]
-        else:
+        elif cl == WALL:
             sub = chain[_drop_collinear(chain)]
+        else:
+            # portals keep every unit step, so both regions' triangles share identical edges even
+            # where the two rings split the run differently
+            sub = chain
         out_pts.append(sub[:-1])
         out_lab.append(np.full(len(sub) - 1, cl))
         end = np.zeros(len(sub) - 1, bool)
@@ -255,10 +259,13 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
         return np.where(hit, order[j], -1)
 
     V_xy, V_fl, T_v, T_reg = [], [], [], []
+    ring_nb = {}  # vertex id -> (xy, region, ring prev, ring next)
     seg_lab = []  # per region: dict (p,q) -> label
     nodes = []  # (xy, region, prev, next)
     nv = 0
     ix, iy = cf.ix, cf.iy
+    # pass 1: raw contours and the label of every unit edge
+    raw = []  # (region, [dense rings], [labels])
     for r in range(R):
         sel = np.nonzero(span_region == r)[0]
         boxes = shapely.box(ix[sel], iy[sel], ix[sel] + 1, iy[sel] + 1)
@@ -267,7 +274,26 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
         for poly in polys:
             rings_raw = [np.asarray(poly.exterior.coords)] + [np.asarray(h.coords) for h in poly.interiors]
             dens = [_densify(rr) for rr in rings_raw]
-            labs = [_ring_labels(p, r, lookup, cf.link, span_region) for p in dens]
+            raw.append((r, sel, dens, [_ring_labels(p, r, lookup, cf.link, span_region) for p in dens]))
+    # pass 2: a portal must be seen from both sides (links are first-match, so not always
+    # symmetric); one-sided portal edges become walls on both sides, so both rings agree
+    portal = set()
+    for r, _, dens, labs in raw:
+        for p_, l_ in zip(dens, labs):
+            a = p_[:, 0].astype(np.int64) * (cf.height + 1) + p_[:, 1].astype(np.int64)
+            b = np.roll(a, -1)
+            for k in np.nonzero(l_ >= 0)[0]:
+                portal.add((r, int(l_[k]), min(int(a[k]), int(b[k])), max(int(a[k]), int(b[k]))))
+    for r, _, dens, labs in raw:
+        for p_, l_ in zip(dens, labs):
+            a = p_[:, 0].astype(np.int64) * (cf.height + 1) + p_[:, 1].astype(np.int64)
+            b = np.roll(a, -1)
+            for k in np.nonzero(l_ >= 0)[0]:
+                if (int(l_[k]), r, min(int(a[k]), int(b[k])), max(int(a[k]), int(b[k]))) not in portal:
+                    l_[k] = WALL
+    # pass 3: simplify, triangulate
+    for r, sel, dens, labs in raw:
+        if True:
             for use_dp in (True, False):
                 simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
                 if any(len(s_[0]) < 3 for s_ in simp):
@@ -325,6 +351,8 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
                 for i in np.nonzero(is_node)[0]:
                     # junctions: the wall continues in another region, so no tangency test there
                     nodes.append((pts[i], r, p_prev[i], p_next[i], bool(both_wall[i]), int(ids[i])))
+                for i in range(K):
+                    ring_nb[int(ids[i])] = (pts[i], r, p_prev[i], p_next[i])
                 off += K
             seg_lab.append(labels)
             nv += len(ring_pts)
@@ -341,6 +369,18 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
     for d in seg_lab:
         labels.update(d)
     nbr = _adjacency(tris, tri_region, verts_xy, labels)
+    # a portal edge the other side did not reproduce acts as a wall: its ends must be corners too,
+    # or shortest paths could not bend around it (conservative: never through it)
+    e_a, e_b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
+    have = {n[5] for n in nodes}
+    for e in np.nonzero(nbr.reshape(-1) < 0)[0]:
+        if labels.get((int(e_a[e]), int(e_b[e])), WALL) == WALL:
+            continue
+        for v in (int(e_a[e]), int(e_b[e])):
+            if v not in have and v in ring_nb:
+                xy_, r_, pv, nx_ = ring_nb[v]
+                nodes.append((xy_, r_, pv, nx_, False, v))
+                have.add(v)
     if nodes:
         node_xy = np.array([n[0] for n in nodes], np.float64)
         node_region = np.array([n[1] for n in nodes], np.int64)
