@@ -65,8 +65,27 @@ def _check_pairs(nm: NavMesh, n: int, seed: int, n_paths: int):
     return d
 
 
+def _check_lipschitz(nm: NavMesh, n: int, seed: int):
+    """A true geodesic distance is 1-Lipschitz: |d(p,g) - d(q,g)| <= d(p,q). Near-misses of a
+    corner (a missing visibility, an unstitched portal) show up as jumps."""
+    rng = np.random.default_rng(seed)
+    p = nm.random_navigable_points(n, seed=seed)
+    up = "xyz".index(nm.up_axis[1])
+    off = rng.normal(size=p.shape) * 0.1
+    off[:, up] = 0.0
+    q = p + off
+    keep = nm.is_navigable(q)
+    p, q = p[keep], q[keep]
+    g = nm.random_navigable_points(8, seed=seed + 1)[np.arange(len(p)) % 8]
+    dp, dq = nm.geodesic_distance(p, g).double(), nm.geodesic_distance(q, g).double()
+    dpq = nm.geodesic_distance(p, q).double()
+    fin = torch.isfinite(dp) & torch.isfinite(dq)
+    assert ((dp - dq).abs()[fin] <= dpq[fin] + 1e-3).all()
+
+
 def test_dungeon_paths(dungeon):
     _check_pairs(dungeon, 64, seed=1, n_paths=8)
+    _check_lipschitz(dungeon, 300, seed=2)
 
 
 def test_dungeon_field_and_moves(dungeon):
@@ -91,3 +110,4 @@ def test_level_many_pairs(shared_data, name):
     nm = _bake(shared_data, name)
     assert nm.area > 1000
     _check_pairs(nm, 400, seed=7, n_paths=40)
+    _check_lipschitz(nm, 3000, seed=8)
