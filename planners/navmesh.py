@@ -497,10 +497,12 @@ class NavMesh:
 
     # ------------------------------------------------------------------ path queries (path.py)
 
-    def find_path(self, start, goal):
+    def find_path(self, start, goal, max_distance: float | None = None):
+        """Exact shortest path (see path.find_path); endpoints snap within `max_distance`
+        (default settings.snap_distance), farther ones raise OffMeshError."""
         from planners.path import find_path
 
-        return find_path(self, start, goal)
+        return find_path(self, start, goal, max_distance=max_distance)
 
     def geodesic_distance(self, starts, goals, max_distance: float | None = None) -> torch.Tensor:
         from planners.path import geodesic_distance
