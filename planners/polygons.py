@@ -293,69 +293,68 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
                     l_[k] = WALL
     # pass 3: simplify, triangulate
     for r, sel, dens, labs in raw:
-        if True:
-            for use_dp in (True, False):
-                simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
-                if any(len(s_[0]) < 3 for s_ in simp):
-                    continue  # a ring collapsed under simplification: keep the exact contour
-                cand = shapely.Polygon(simp[0][0], [s_[0] for s_ in simp[1:]])
-                if cand.is_valid:
-                    break
-            tri_geom = shapely.constrained_delaunay_triangles(cand)
-            tri_xy = shapely.get_coordinates(tri_geom.geoms if hasattr(tri_geom, "geoms") else tri_geom)
-            tri_xy = tri_xy.reshape(-1, 4, 2)[:, :3]
-            ring_pts = np.concatenate([s[0] for s in simp])
-            vid = {(float(x), float(y)): nv + i for i, (x, y) in enumerate(ring_pts)}
-            try:
-                tv = np.array([[vid[(float(x), float(y))] for x, y in t] for t in tri_xy], np.int64)
-            except KeyError as e:  # pragma: no cover - CDT added a Steiner point
-                raise RuntimeError(f"navmesh bake: triangulation of region {r} added vertex {e}") from None
-            # counter-clockwise
-            a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
-            cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-            tv = np.where((cr < 0)[:, None], tv[:, [0, 2, 1]], tv)
-            tv = tv[np.abs(cr) > 1e-12]
-            # vertex floors: highest floor of this region's cells touching the corner (Recast's corner height)
-            fl = np.full(len(ring_pts), -np.inf)
-            for dx in (-1, 0):
-                for dy in (-1, 0):
-                    sp_ = lookup(r, np.floor(ring_pts[:, 0]).astype(np.int64) + dx,
-                                 np.floor(ring_pts[:, 1]).astype(np.int64) + dy)
-                    fl = np.where(sp_ >= 0, np.maximum(fl, cf.floor[np.maximum(sp_, 0)]), fl)
-            if not np.all(np.isfinite(fl)):  # corner pulled off the raster by simplification: nearest cell
-                bad = ~np.isfinite(fl)
-                cxy = np.stack([ix[sel], iy[sel]], 1) + 0.5
-                d2 = ((ring_pts[bad][:, None, :] - cxy[None]) ** 2).sum(-1)
-                fl[bad] = cf.floor[sel[np.argmin(d2, 1)]]
-            V_xy.append(ring_pts)
-            V_fl.append(fl)
-            T_v.append(tv)
-            T_reg.append(np.full(len(tv), r))
-            off = 0
-            labels = {}
-            for pts, lab, end in simp:
-                K = len(pts)
-                ids = nv + off + np.arange(K)
-                for i in range(K):
-                    labels[(int(ids[i]), int(ids[(i + 1) % K]))] = int(lab[i])
-                # nodes: reflex wall vertices and wall/portal junctions
-                prev_lab = np.roll(lab, 1)
-                p_prev = np.roll(pts, 1, axis=0)
-                p_next = np.roll(pts, -1, axis=0)
-                d1 = pts - p_prev
-                d2 = p_next - pts
-                cr = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-                both_wall = (lab == WALL) & (prev_lab == WALL)
-                junction = (lab == WALL) != (prev_lab == WALL)
-                is_node = (both_wall & (cr < -1e-9)) | junction
-                for i in np.nonzero(is_node)[0]:
-                    # junctions: the wall continues in another region, so no tangency test there
-                    nodes.append((pts[i], r, p_prev[i], p_next[i], bool(both_wall[i]), int(ids[i])))
-                for i in range(K):
-                    ring_nb[int(ids[i])] = (pts[i], r, p_prev[i], p_next[i])
-                off += K
-            seg_lab.append(labels)
-            nv += len(ring_pts)
+        for use_dp in (True, False):
+            simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
+            if any(len(s_[0]) < 3 for s_ in simp):
+                continue  # a ring collapsed under simplification: keep the exact contour
+            cand = shapely.Polygon(simp[0][0], [s_[0] for s_ in simp[1:]])
+            if cand.is_valid:
+                break
+        tri_geom = shapely.constrained_delaunay_triangles(cand)
+        tri_xy = shapely.get_coordinates(tri_geom.geoms if hasattr(tri_geom, "geoms") else tri_geom)
+        tri_xy = tri_xy.reshape(-1, 4, 2)[:, :3]
+        ring_pts = np.concatenate([s[0] for s in simp])
+        vid = {(float(x), float(y)): nv + i for i, (x, y) in enumerate(ring_pts)}
+        try:
+            tv = np.array([[vid[(float(x), float(y))] for x, y in t] for t in tri_xy], np.int64)
+        except KeyError as e:  # pragma: no cover - CDT added a Steiner point
+            raise RuntimeError(f"navmesh bake: triangulation of region {r} added vertex {e}") from None
+        # counter-clockwise
+        a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
+        cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        tv = np.where((cr < 0)[:, None], tv[:, [0, 2, 1]], tv)
+        tv = tv[np.abs(cr) > 1e-12]
+        # vertex floors: highest floor of this region's cells touching the corner (Recast's corner height)
+        fl = np.full(len(ring_pts), -np.inf)
+        for dx in (-1, 0):
+            for dy in (-1, 0):
+                sp_ = lookup(r, np.floor(ring_pts[:, 0]).astype(np.int64) + dx,
+                             np.floor(ring_pts[:, 1]).astype(np.int64) + dy)
+                fl = np.where(sp_ >= 0, np.maximum(fl, cf.floor[np.maximum(sp_, 0)]), fl)
+        if not np.all(np.isfinite(fl)):  # corner pulled off the raster by simplification: nearest cell
+            bad = ~np.isfinite(fl)
+            cxy = np.stack([ix[sel], iy[sel]], 1) + 0.5
+            d2 = ((ring_pts[bad][:, None, :] - cxy[None]) ** 2).sum(-1)
+            fl[bad] = cf.floor[sel[np.argmin(d2, 1)]]
+        V_xy.append(ring_pts)
+        V_fl.append(fl)
+        T_v.append(tv)
+        T_reg.append(np.full(len(tv), r))
+        off = 0
+        labels = {}
+        for pts, lab, end in simp:
+            K = len(pts)
+            ids = nv + off + np.arange(K)
+            for i in range(K):
+                labels[(int(ids[i]), int(ids[(i + 1) % K]))] = int(lab[i])
+            # nodes: reflex wall vertices and wall/portal junctions
+            prev_lab = np.roll(lab, 1)
+            p_prev = np.roll(pts, 1, axis=0)
+            p_next = np.roll(pts, -1, axis=0)
+            d1 = pts - p_prev
+            d2 = p_next - pts
+            cr = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+            both_wall = (lab == WALL) & (prev_lab == WALL)
+            junction = (lab == WALL) != (prev_lab == WALL)
+            is_node = (both_wall & (cr < -1e-9)) | junction
+            for i in np.nonzero(is_node)[0]:
+                # junctions: the wall continues in another region, so no tangency test there
+                nodes.append((pts[i], r, p_prev[i], p_next[i], bool(both_wall[i]), int(ids[i])))
+            for i in range(K):
+                ring_nb[int(ids[i])] = (pts[i], r, p_prev[i], p_next[i])
+            off += K
+        seg_lab.append(labels)
+        nv += len(ring_pts)
     if not V_xy:
         z2 = np.zeros((0, 2))
         zi = np.zeros(0, np.int64)
