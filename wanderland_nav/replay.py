@@ -1,4 +1,6 @@
-"""Replay a rollout or expert paths into a rerun recording: `python -m wanderland_nav.replay rollout=<file> out=<file.rrd>`.
+"""Replay a rollout or expert paths into a rerun recording.
+
+    python -m wanderland_nav.replay rollout=<file> out=<file.rrd>
 
 * `rollout=<file.npz>` (from `evaluate ... save_rollouts=<file.npz>`): the scene (collision mesh,
   navmesh by island, points, capture cameras), the episodes the agents ran, and per step each agent's
@@ -13,7 +15,6 @@ Thin by design: it resolves files and calls `wanderland_nav.rollouts` / `wanderl
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -94,7 +95,8 @@ def run(cfg: DictConfig) -> dict:
     out = Path(cfg.out) if cfg.out is not None else src.with_suffix(".rrd")
     agents = list(cfg.agents) if cfg.agents is not None else None
     counts = write_recording(out, scene=scene, rollout=rollout, episodes=episodes, frames=frames, agents=agents,
-                             max_points=int(cfg.max_points), max_cameras=int(cfg.max_cameras), frame_chunk=int(cfg.frame_chunk))
+                             max_points=int(cfg.max_points), max_cameras=int(cfg.max_cameras),
+                             frame_chunk=int(cfg.frame_chunk))
     print(f"wrote {out} ({rollout.num_steps} steps x {rollout.num_agents} agents, {len(episodes)} episodes, "
           f"{time.perf_counter() - t0:.1f}s)")
     if cfg.viewer:

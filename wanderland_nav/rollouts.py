@@ -16,8 +16,8 @@ Layout (version `ROLLOUT_VERSION`), `T` recorded steps of `B` agents, all poses 
 | `action` | f32 `[T, B, ...]` | `keys.ACTION` (`[K, 2]` waypoints or `[2]` (v, omega)) |
 | `waypoints` | f32 `[T, B, K, 2]` | the policy's predicted body-frame waypoints (= action in waypoint mode) |
 | `reward`, `distance_to_goal` | f32 `[T, B]` | step reward; geodesic distance after the step |
-| `done`, `success`, `collision` | bool `[T, B]` | episode ended at this step / ended in the goal / navmesh blocked the motion |
-| `episode_index`, `step_count` | i64 `[T, B]` | running episode (index into `episode_ids`); steps taken before this one |
+| `done`, `success`, `collision` | bool `[T, B]` | episode ended here / ended in the goal / motion blocked |
+| `episode_index`, `step_count` | i64 `[T, B]` | episode (index into `episode_ids`); steps taken before |
 | `rgb` (optional) | u8 `[T, B, H, W, 3]` | the frame observed at `position` |
 | `depth` (optional) | f32 `[T, B, H, W, 1]` | z-depth for `rgb` |
 | `episode_ids` | str `[E]` | `episode_id` of each episode index |
@@ -183,7 +183,8 @@ def _check(arrays: dict[str, np.ndarray], where: str) -> None:
         if a.dtype.kind not in kinds:
             raise RolloutFormatError(f"{where}: field {name!r} has dtype {a.dtype}, expected kind {kinds!r}")
         if (ndim is not None and a.ndim != ndim) or a.shape[:2] != TB:
-            raise RolloutFormatError(f"{where}: field {name!r} has shape {a.shape}, expected [T={TB[0]}, B={TB[1]}, ...]"
+            raise RolloutFormatError(f"{where}: field {name!r} has shape {a.shape}, "
+                                     f"expected [T={TB[0]}, B={TB[1]}, ...]"
                                      + (f" with {ndim} dims" if ndim else ""))
     E = arrays["episode_ids"].shape[0] if "episode_ids" in arrays else None
     if E is None:
@@ -265,7 +266,8 @@ def step_arrays(td, td_next, frames: bool) -> dict[str, np.ndarray]:
         "position": get(td, keys.AGENT_POSITION), "yaw": get(td, keys.AGENT_YAW).reshape(B),
         "next_position": get(td_next, keys.AGENT_POSITION), "next_yaw": get(td_next, keys.AGENT_YAW).reshape(B),
         "action": action, "waypoints": wp,
-        "reward": get(td_next, keys.REWARD).reshape(B), "distance_to_goal": get(td_next, keys.DISTANCE_TO_GOAL).reshape(B),
+        "reward": get(td_next, keys.REWARD).reshape(B),
+        "distance_to_goal": get(td_next, keys.DISTANCE_TO_GOAL).reshape(B),
         "done": get(td_next, keys.DONE).reshape(B), "success": get(td_next, keys.SUCCESS, false).reshape(B),
         "collision": get(td_next, keys.COLLISION, false).reshape(B),
         "episode_index": get(td, keys.EPISODE_INDEX).reshape(B), "step_count": get(td, keys.STEP_COUNT).reshape(B),
@@ -343,7 +345,8 @@ def rollout_from_tensordict(td, meta: RolloutMeta | None = None, episode_ids=Non
                    rgb=st.get("rgb"), depth=st.get("depth"))
 
 
-def render_rollout_frames(meta: RolloutMeta, gaussians, *, device: str = "cpu", renderer=None, depth: bool | None = None):
+def render_rollout_frames(meta: RolloutMeta, gaussians, *, device: str = "cpu", renderer=None,
+                          depth: bool | None = None):
     """A frame source `(position_nav [N, 3], yaw [N]) -> (rgb u8 [N, H, W, 3], depth [N, H, W, 1] | None)`
     that renders the agent camera exactly as the env did (same `CameraConfig`, intrinsics, pose formula),
     batched `render_chunk` cameras per renderer call. Replay uses it when a file has no frames."""
@@ -383,7 +386,8 @@ def expert_rollout(episodes, nav_from_scene: np.ndarray, *, up_axis: str, camera
     R_ns = np.asarray(nav_from_scene, np.float64)
     pos, yaw, nxt_pos, nxt_yaw, wps, dist, done, ep_idx, step = [], [], [], [], [], [], [], [], []
     for i, e in enumerate(episodes):  # per episode (not per sample): every line below is batched over its path
-        p = np.asarray(e.gt_locations if len(e.gt_locations) >= 2 else e.reference_path, np.float64) @ R_ns.T  # [L, 3] nav
+        src = e.gt_locations if len(e.gt_locations) >= 2 else e.reference_path
+        p = np.asarray(src, np.float64) @ R_ns.T  # [L, 3] nav frame
         p = p[np.unique(np.r_[np.arange(0, len(p), stride), len(p) - 1])]
         if len(p) < 2:
             continue

@@ -51,9 +51,33 @@ class NullLogger:
 class RolloutHookTrainer(PPOTrainer):
     """PPOTrainer that also hands each collected batch `[B, T]` to `logger.log_rollout` (the proposed hook)."""
 
+    batches: list = []
+
     def update(self, batch):
+        if not RolloutHookTrainer.batches:
+            RolloutHookTrainer.batches.append(batch.clone())
         self.logger.log_rollout(batch, self.frames, tag="train")
         return super().update(batch)
+
+
+def isolated_logger_cost(batch, stats: dict, iterations: int, reps: int, tmp: Path, with_rollouts: bool) -> tuple:
+    """Wall and CPU seconds per iteration spent by a `RerunLogger` alone (same calls as in training:
+    one `log_scalars` of the trainer's stats, and optionally one `log_rollout(batch)`), including the
+    final flush; min over `reps` (the least disturbed by other processes)."""
+    from wanderland_nav.viz.rerun_logger import RerunLogger
+
+    walls, cpus = [], []
+    for r in range(reps):
+        t0, c0 = time.perf_counter(), time.process_time()
+        lg = RerunLogger(tmp / f"iso_{int(with_rollouts)}_{r}")
+        for i in range(iterations):
+            lg.log_scalars(stats, i * 64)
+            if with_rollouts:
+                lg.log_rollout(batch, i * 64, tag="train")
+        lg.close()
+        walls.append((time.perf_counter() - t0) / iterations)
+        cpus.append((time.process_time() - c0) / iterations)
+    return min(walls), min(cpus)
 
 
 def main() -> None:
@@ -98,6 +122,7 @@ def main() -> None:
         "rerun+rollouts": (RolloutHookTrainer, lambda i: RerunLogger(tmp / f"rr_{i}")),
     }
     fps: dict[str, list[float]] = {k: [] for k in variants}
+    stats_example: dict = {}
     cpu_fps: dict[str, list[float]] = {k: [] for k in variants}
     for rep in range(args.reps):
         for name, (cls, make_logger) in variants.items():
@@ -111,6 +136,9 @@ def main() -> None:
             logger.close()
             dt, dc = time.perf_counter() - t0, time.process_time() - c0
             fps[name].append(tr.frames / dt)
+            last_stats = logger.rows[-1] if isinstance(logger, NullLogger) else None
+            if last_stats is not None:
+                stats_example = last_stats
             cpu_fps[name].append(tr.frames / dc)
             print(f"rep {rep} {name:15s} {tr.frames} frames in {dt:6.1f}s wall ({tr.frames / dt:6.2f} frames/s), "
                   f"{dc:6.1f}s CPU ({tr.frames / dc:6.2f} frames/CPU-s)", flush=True)
@@ -123,6 +151,16 @@ def main() -> None:
             m = statistics.median(v)
             print(f"  {label:4s} {name:15s} {m:7.2f} frames/s  overhead {100 * (base - m) / base:+6.1f}%  (runs: "
                   + ", ".join(f"{x:.2f}" for x in v) + ")")
+    # the logger's own cost, measured alone (robust to a shared, loaded CPU), relative to an iteration
+    iter_wall = fpb / statistics.median(fps["none"])
+    iter_cpu = fpb / statistics.median(cpu_fps["none"])
+    batch = RolloutHookTrainer.batches[0]
+    print(f"\nlogger alone, per PPO iteration (baseline iteration: {iter_wall:.1f}s wall, {iter_cpu:.1f}s CPU):")
+    for with_ro in (False, True):
+        w, c = isolated_logger_cost(batch, stats_example, 10, 5, tmp, with_ro)
+        label = "rerun (scalars)" if not with_ro else "rerun + rollout"
+        print(f"  {label:16s} {1000 * w:8.1f} ms wall, {1000 * c:8.1f} ms CPU  -> {100 * w / iter_wall:5.2f}% of "
+              f"wall, {100 * c / iter_cpu:5.2f}% of CPU per iteration")
     for d in sorted(tmp.iterdir()):
         rrd = d / "rerun.rrd"
         if rrd.is_file():

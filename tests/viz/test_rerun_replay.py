@@ -140,7 +140,8 @@ def test_replay_recording_reads_back(recorded, demo, tmp_path):
     assert sum(e.startswith("world/capture/") for e in ents) == counts["scene"]["cameras"] == 4
     # the scene frame's up axis: -y for the v1-layout demo
     vc = _rows_by_entity(chunks, "ViewCoordinates:xyz")["world"]
-    assert vc and np.array_equal(np.asarray(vc[0][1]).ravel(), np.asarray(rr.ViewCoordinates.RIGHT_HAND_Y_DOWN.as_arrow_array().to_pylist()).ravel())
+    want = rr.ViewCoordinates.RIGHT_HAND_Y_DOWN.as_arrow_array().to_pylist()
+    assert vc and np.array_equal(np.asarray(vc[0][1]).ravel(), np.asarray(want).ravel())
     # one pose and one image per step, on both timelines
     poses = _rows_by_entity(chunks, "Transform3D:translation", "step")["world/agents/agent_1"]
     assert sorted(t for t, _ in poses) == list(range(T))
@@ -222,7 +223,6 @@ def test_rerun_logger_protocol(recorded, tmp_path):
 
 def test_recorder_from_env_steps_and_tensordict(env, recorded):
     """`RolloutRecorder.add` fed by hand equals `rollout_from_tensordict` of the same steps stacked [B, T]."""
-    from tensordict import TensorDict  # noqa: F401  (stack below)
     import torch as th
 
     from wanderland_nav.envs import ExpertPolicy
