@@ -28,9 +28,9 @@ from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer, make_actor  # noqa: E40
 
 DEMO = {  # conf/policy/*.yaml demo sizes
     "cnn": dict(context=2, image_size=(64, 64), feature_dim=128),
-    "citywalker": dict(encoder="cnn", image_size=(64, 64), dim=128, depth=2, heads=4),
-    "nomad": dict(image_size=(96, 96), dim=128, depth=2, heads=4, unet_hidden=64, use_goal_vector=True),
-    "mbra": dict(image_size=(96, 96), dim=128, depth=2, heads=4),
+    "citywalker": dict(encoder="cnn", image_size=(32, 32), dim=128, depth=2, heads=4),
+    "nomad": dict(image_size=(64, 64), dim=128, depth=2, heads=4, unet_hidden=64, use_goal_vector=True),
+    "mbra": dict(image_size=(64, 64), dim=128, depth=2, heads=4),
 }
 
 
@@ -87,7 +87,7 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.pipeline import ensure_demo_scene
-    from wanderland_nav.train import render_gaussians
+    from wanderland_nav.rl.policy_env import lod_gaussians
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")
     episodes = Path(scene.root) / "episodes.json"
@@ -99,7 +99,7 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
     cfg.camera.history = policy.context
     cfg.kinematics.num_waypoints = policy.num_waypoints
     cfg.termination.max_steps = 120
-    g = render_gaussians(scene, 10000)
+    g = lod_gaussians(scene.gaussians_path, 10000)
     fpb = batch * 25
 
     class Quiet:

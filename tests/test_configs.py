@@ -112,3 +112,24 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     assert (tmp_path / "run" / "table.txt").read_text().count("\n") == 2 + len(rows)
     # a second start finds everything done: no retraining, same table
     assert run(cfg) == rows
+
+
+def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
+    """`python -m wanderland_nav.evaluate checkpoints=[...]`: a trained checkpoint next to another."""
+    from wanderland_nav.evaluate import run as evaluate
+    from wanderland_nav.train import run
+
+    scene = demo_episodes.parent
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("train", overrides=["+exp=mbra_bc", "debug=smoke", f"scene.path={scene}", "scene.demo=false",
+                                          f"run_dir={tmp_path / 'run'}", "render.max_gaussians=2000"])
+    run(cfg)
+    ck = tmp_path / "run" / "checkpoints" / "last.pt"
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        ecfg = compose("evaluate", overrides=[f"scene_path={scene}", f"checkpoints=[{ck},{ck}]", "num_episodes=2",
+                                              "batch_size=2", f"out={tmp_path}", "progress=false"])
+    rows = evaluate(ecfg)
+    assert list(rows) == [f"{tmp_path.name}/run", str(ck)]
+    a, b = rows.values()
+    assert a["episodes"] == 2 and a == b      # same weights, same episodes, deterministic policy
+    assert (tmp_path / "eval_checkpoints.json").is_file()

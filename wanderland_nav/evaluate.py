@@ -63,8 +63,27 @@ def resolve_scene(cfg: DictConfig):
     return scene, episodes
 
 
+def run_checkpoints(cfg: DictConfig):
+    """`checkpoints=[a.pt,b.pt,...]`: trained policies side by side with relative change (Table 3 layout),
+    each in the env it was trained in; the first is the baseline. Writes `eval_checkpoints.json`."""
+    from wanderland_nav.rl.compare import compare_checkpoints
+
+    scene, episodes = resolve_scene(cfg)
+    rows, results, table = compare_checkpoints(list(cfg.checkpoints), scene, episodes, split=cfg.split,
+                                               num_episodes=cfg.num_episodes, batch_size=int(cfg.batch_size),
+                                               device=str(cfg.device), seed=int(cfg.seed), progress=bool(cfg.progress))
+    print(f"{scene.name}: split {cfg.split}")
+    print(table, flush=True)
+    out = Path(cfg.out) if cfg.out is not None else _hydra_output_dir()
+    atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table,
+                                                      "summary": {k: r.summary for k, r in results.items()}})
+    return rows
+
+
 def run(cfg: DictConfig) -> EvaluationResult:
     """Everything `main` does, callable with a composed config (tests)."""
+    if cfg.get("checkpoints"):
+        return run_checkpoints(cfg)
     env_cfg = NavEnvConfig.from_dict(OmegaConf.to_container(cfg.env, resolve=True), source="conf/env")
     policy_cfg = OmegaConf.to_container(cfg.policy, resolve=True)
     if not policy_cfg.get("needs_images", True) and env_cfg.camera.enabled:

@@ -34,6 +34,7 @@ from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.rl.bc import BCConfig, ExpertPaths, train_bc
 from wanderland_nav.rl.checkpoint import Checkpointer, load_policy_weights, save_checkpoint
 from wanderland_nav.rl.loggers import make_logger
+from wanderland_nav.rl.policy_env import PolicyActor, lod_gaussians, shaped_env_config
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
 from wanderland_nav.rl.report import comparison_table
 
@@ -84,45 +85,10 @@ def resolve_scene(cfg: DictConfig):
     return scene, episodes
 
 
-def render_gaussians(scene, max_gaussians: int | None):
-    """The scene's Gaussians, or a level-of-detail subset of the `max_gaussians` with the largest
-    opacity x footprint (sigmoid(opacity) * exp(sum of the two largest log-scales)).
-
-    Why: the pure-torch rasteriser's cost grows with the Gaussians per tile; on a 2-core CPU the full tiny
-    demo (54k) renders ~1 agent-frame/s, a 10k subset ~8x faster with the same layout and colours. Training
-    and evaluation use the same subset, so the numbers are consistent; `null` renders everything.
-    """
-    from wanderland_nav.render import Gaussians
-
-    g = Gaussians.load(scene.gaussians_path)
-    if max_gaussians is None or len(g) <= int(max_gaussians):
-        return g
-    ls = g.log_scales.topk(2, dim=-1).values.sum(-1)
-    score = torch.sigmoid(g.opacity_logits.view(-1)) * torch.exp(ls)
-    keep = score.topk(int(max_gaussians)).indices.sort().values
-    log.info("rendering %d of %d Gaussians (render.max_gaussians)", len(keep), len(g))
-    return g[keep]
-
-
 # ------------------------------------------------------------------------------------------ config
 def policy_kwargs(cfg: DictConfig) -> tuple[str, dict]:
     d = OmegaConf.to_container(cfg.policy, resolve=True)
     return d.pop("name"), d
-
-
-def env_config_for(cfg: DictConfig, policy):
-    """NavEnvConfig from `cfg.env`, shaped to the policy: camera size = the policy's input size, at least
-    `policy.context` frames of history, `policy.num_waypoints` waypoints per action."""
-    from wanderland_nav.envs import NavEnvConfig
-
-    d = OmegaConf.to_container(cfg.env, resolve=True)
-    d.setdefault("camera", {})
-    d.setdefault("kinematics", {})
-    d["camera"]["height"], d["camera"]["width"] = (int(x) for x in policy.image_size)
-    d["camera"]["history"] = max(int(d["camera"].get("history", 1)), policy.context)
-    d["kinematics"]["num_waypoints"] = policy.num_waypoints
-    d["kinematics"]["action_mode"] = "waypoints"
-    return NavEnvConfig.from_dict(d, source="conf/env (+ policy shape)")
 
 
 def dataclass_from(cls, d) -> object:
@@ -137,26 +103,12 @@ def dataclass_from(cls, d) -> object:
 
 
 # ------------------------------------------------------------------------------------------ run
-class _Deterministic(torch.nn.Module):
-    """Evaluation wrapper: the policy's mean waypoints (or a sample) as `ACTION`."""
-
-    def __init__(self, policy, deterministic: bool):
-        super().__init__()
-        self.policy, self.deterministic = policy, deterministic
-
-    def forward(self, td):
-        return self.policy.select_action(td, deterministic=self.deterministic)
-
-    def reset(self):
-        self.policy.reset()
-
-
 def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Path, logger, step: int) -> None:
     from wanderland_nav.envs.evaluation import run_evaluation
 
     policy.eval()
     t = time.perf_counter()
-    actor = _Deterministic(policy, bool(cfg.eval.deterministic))
+    actor = PolicyActor(policy, bool(cfg.eval.deterministic))
     save_dir, wants = cfg.get("save_rollouts"), bool(getattr(logger, "wants_rollouts", False))
     if save_dir or wants:  # rollout file (+save_rollouts=<dir>) and/or renders for logger=rerun
         from wanderland_nav.rollouts import record_evaluation
@@ -178,7 +130,6 @@ def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Pat
 def run(cfg: DictConfig) -> dict:
     """Everything `main` does, callable with a composed config (tests). Returns `results` (name -> eval)."""
     from wanderland_nav.envs.factory import make_nav_env
-    from wanderland_nav.rl.checkpoint import load_checkpoint
 
     t_start = time.perf_counter()
     torch.manual_seed(int(cfg.seed))
@@ -194,9 +145,11 @@ def run(cfg: DictConfig) -> dict:
     scene, episodes_path = resolve_scene(cfg)
     name, kw = policy_kwargs(cfg)
     policy = make_policy(name, **kw).to(cfg.device)
-    env_cfg = env_config_for(cfg, policy)
+    render_size = cfg.render.get("image_size")
+    env_cfg = shaped_env_config(OmegaConf.to_container(cfg.env, resolve=True), policy,
+                                tuple(render_size) if render_size else None)
     seed, device = int(cfg.seed), str(cfg.device)
-    gaussians = render_gaussians(scene, cfg.render.max_gaussians)
+    gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)
     eval_env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,
                             episodes_path=episodes_path, split=cfg.eval.split, seed=seed, gaussians=gaussians)
     env_fn = partial(make_nav_env, str(scene.root), config=env_cfg, batch_size=int(cfg.train_env.batch_size),
@@ -240,8 +193,10 @@ def run(cfg: DictConfig) -> dict:
             stats = train_bc(policy, train_env, paths, dataclass_from(BCConfig, cfg.algo.bc), logger=logger,
                              seed=seed, progress=bool(cfg.progress))
             train_env.close()
-            ckpt.save(0, policy=policy, optimizer=None, counters={"bc_updates": int(cfg.algo.bc.updates_per_round)},
-                      config=config_dict, phase="bc_done", extra={"bc": stats})
+            bc_kw = dict(policy=policy, optimizer=None, counters={"bc_updates": int(cfg.algo.bc.updates_per_round)},
+                         config=config_dict, phase="bc_done", extra={"bc": stats})
+            save_checkpoint(ckpt.dir / "bc.pt", **bc_kw)  # kept: PPO overwrites last.pt; init_checkpoint=<this>
+            ckpt.save(0, **bc_kw)
             phase = "bc_done"
         if "BC" not in results:
             _evaluate("BC", policy, eval_env, cfg, results, results_path, logger, 0)
