@@ -217,11 +217,13 @@ def test_rerun_logger_protocol(recorded, tmp_path):
     assert "eval/NE" not in sc  # non-finite values are skipped
     chunks = _chunks(tmp_path / "rerun.rrd")
     poses = _rows_by_entity(chunks, "Transform3D:translation", "rollout_step")
-    assert len(poses["rollouts/eval/agents/agent_0"]) == 2 * ro.num_steps
-    assert "rollouts/eval/agents/agent_1" not in poses
+    assert len(poses["world/rollouts/eval/agents/agent_0"]) == 2 * ro.num_steps
+    assert "world/rollouts/eval/agents/agent_1" not in poses
+    ents = {c.entity_path.lstrip("/") for c in chunks}
+    assert {"world/points", "world/navmesh", "rollouts/eval/plots/reward/agent_0"} <= ents  # scene logged once
 
 
-def test_recorder_from_env_steps_and_tensordict(env, recorded):
+def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     """`RolloutRecorder.add` fed by hand equals `rollout_from_tensordict` of the same steps stacked [B, T]."""
     import torch as th
 
@@ -248,3 +250,15 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded):
     assert ro.done[3].all()  # max_steps=4: every agent times out at its 4th step
     segs = ro.episode_segments()
     assert [(b, s, e) for b, _, s, e in segs] == [(0, 0, 4), (0, 4, 5), (1, 0, 4), (1, 4, 5)]
+    # the training logger places a collector-style batch in the scene once a Rollout gave it the frame
+    from wanderland_nav.viz.rerun_logger import RerunLogger
+
+    lg = RerunLogger(tmp_path, scene=False)
+    lg.log_rollout(th.stack(steps, 1), step=0, tag="train")  # no frame known yet: nav-frame space
+    lg.log_rollout(ro, step=1, tag="eval")
+    lg.log_rollout(th.stack(steps, 1), step=2, tag="train")
+    lg.close()
+    poses = _rows_by_entity(_chunks(tmp_path / "rerun.rrd"), "Transform3D:translation", "step")
+    assert len(poses["rollouts/train/nav/agents/agent_0"]) == 5 and len(poses["world/rollouts/train/agents/agent_0"]) == 5
+    got = np.asarray([v for t, v in poses["world/rollouts/train/agents/agent_1"]]).reshape(-1, 3)
+    np.testing.assert_allclose(got, ro.position[:, 1] @ np.asarray(env.scene.nav_from_scene), atol=1e-5)

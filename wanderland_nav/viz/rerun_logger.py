@@ -13,6 +13,7 @@ streamed as the run goes (a killed run leaves a readable, footer-less recording)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -32,11 +33,13 @@ class RerunLogger:
     rollout_every: log every n-th `log_rollout` call (1: all of them; 0: never).
     max_agents: agents of a rollout to show (their frames dominate the recording's size).
     spawn: also stream to a viewer (spawned if none is running; ignored when none can be started).
+    scene: with the first rollout that names its scene (`Rollout.meta.scene_root`), log the scene
+        (point subsample, collision mesh, navmesh, camera frustums) once, as context for the rollouts.
     """
 
     def __init__(self, out_dir: str | Path | None, *, rollout_every: int = 1, max_agents: int = 2,
                  spawn: bool = False, application_id: str = "wanderland_nav", recording_id: str | None = None,
-                 file_name: str = "rerun.rrd"):
+                 file_name: str = "rerun.rrd", scene: bool = True):
         self.path = Path(out_dir) / file_name if out_dir is not None else None
         rid = recording_id or (Path(out_dir).resolve().name if out_dir is not None else "run")
         self.rec = rr.RecordingStream(application_id, recording_id=rid)
@@ -51,6 +54,8 @@ class RerunLogger:
                 print(f"RerunLogger: could not spawn a viewer ({e}); writing {self.path}")
         self.rollout_every, self.max_agents = int(rollout_every), int(max_agents)
         self._rollout_calls = 0
+        self._scene_pending = bool(scene)
+        self._meta = None  # the last Rollout's meta (frames, camera), reused for TensorDict rollouts
         self.rollouts_logged = 0
 
     @property
@@ -69,16 +74,33 @@ class RerunLogger:
                 self.rec.log(k, rr.Scalars(v))
 
     def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
-        """A `Rollout` or a TorchRL TensorDict `[B, T]`; logged under `rollouts/<tag>/` on timeline
-        `rollout_step`, with `step` held at the training step, when its turn comes (`rollout_every`)."""
+        """A `Rollout` or a TorchRL TensorDict `[B, T]` (a collector batch), when its turn comes (`rollout_every`).
+
+        Logged on timeline `rollout_step` with `step` held at the training step: under
+        `world/rollouts/<tag>/` in the scene frame once a `Rollout` has told the logger the scene's
+        frame (a TensorDict alone: under `rollouts/<tag>/nav`, nav frame); plots under `rollouts/<tag>/plots`.
+        """
         self._rollout_calls += 1
         if self.rollout_every <= 0 or (self._rollout_calls - 1) % self.rollout_every:
             return
         if not isinstance(rollout, Rollout):
-            rollout = rollout_from_tensordict(rollout)
+            # a collector batch has no frame information: borrow the last Rollout's (same scene, same camera)
+            meta = dataclasses.replace(self._meta, metrics=[]) if self._meta is not None else None
+            rollout = rollout_from_tensordict(rollout, meta=meta)
+        else:
+            self._meta = rollout.meta
+        in_scene = self._meta is not None  # poses can be placed in the scene frame
+        if in_scene and self._scene_pending and rollout.meta.scene_root and Path(rollout.meta.scene_root).is_dir():
+            self._scene_pending = False
+            from wanderland_nav.scene import load_scene
+            from wanderland_nav.viz.rerun_scene import log_scene
+
+            log_scene(self.rec, load_scene(rollout.meta.scene_root), max_points=20_000, max_cameras=16,
+                      camera_images=False)
         agents = list(range(min(self.max_agents, rollout.num_agents)))
         safe_tag = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in str(tag))
-        log_rollout(self.rec, rollout, prefix=f"rollouts/{safe_tag}", plots_prefix=f"rollouts/{safe_tag}/plots",
+        prefix = f"world/rollouts/{safe_tag}" if in_scene else f"rollouts/{safe_tag}/nav"  # nav frame: own space
+        log_rollout(self.rec, rollout, prefix=prefix, plots_prefix=f"rollouts/{safe_tag}/plots",
                     agents=agents, timeline="rollout_step", fixed_times={"step": int(step)})
         self.rollouts_logged += 1
 
