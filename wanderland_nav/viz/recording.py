@@ -50,7 +50,16 @@ def write_recording(out: str | Path, *, scene=None, rollout: Rollout | None = No
 
 
 def open_viewer(path: str | Path) -> bool:
-    """Start the rerun viewer on `path` in the background when one can run; False (with a message) if not."""
+    """Start the rerun viewer on `path` in the background when one can run; False (with a message) if not.
+
+    Headless machines (no DISPLAY / WAYLAND_DISPLAY on Linux) get the command to run elsewhere instead of
+    a viewer process that dies on start.
+    """
+    import os
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        print(f"no display for the viewer; open the recording where there is one: rerun {path}")
+        return False
     exe = shutil.which("rerun")
     cmd = [exe, str(path)] if exe else [sys.executable, "-m", "rerun", str(path)]
     try:
