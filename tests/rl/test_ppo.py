@@ -101,3 +101,27 @@ def test_ppo_learns_fake_point_goal(tmp_path):
     early = sum(r["train/reward_mean"] for _, r in log.rows[:3]) / 3
     late = sum(r["train/reward_mean"] for _, r in log.rows[-3:]) / 3
     assert late > early
+
+
+def _fake_env_fn():
+    return FakeNavEnv((2,))
+
+
+@pytest.mark.slow
+def test_multi_sync_collector_two_workers(tmp_path):
+    """collector=multi: two worker processes, one env each, batches gathered synchronously."""
+    log = ListLogger()
+    cfg = PPOConfig(total_frames=64, frames_per_batch=32, minibatch_size=16, epochs=1)
+    t = PPOTrainer(tiny_policy(), _fake_env_fn, cfg, logger=log, num_workers=2, progress=False)
+    t.train()
+    assert [s for s, _ in log.rows] == [32, 64]
+
+
+def test_critic_warmup_leaves_the_policy_alone(tmp_path):
+    p = tiny_policy()
+    before = {k: v.clone() for k, v in p.state_dict().items()}
+    t = trainer(p, tmp_path, 32, critic_warmup_iters=1)
+    t.train()
+    after = p.state_dict()
+    changed = {k for k in before if not torch.equal(before[k], after[k])}
+    assert changed and all(k.startswith("value_head.") for k in changed), changed

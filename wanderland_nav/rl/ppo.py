@@ -9,8 +9,9 @@ The loop (`PPOTrainer.train`) reads top to bottom like a CleanRL/TorchRL recipe:
 
 The actor is the policy wrapped in a `ProbabilisticActor` with `WaypointNormal` (independent Normal over
 the `[K, 2]` waypoints; see `policies.base`). The critic is the policy's value head on no-grad trunk
-features (`NavPolicy.value`), and the loss uses `separate_losses=True`, so the critic loss never
-reaches the shared trunk: RL fine-tuning changes the policy, as the paper does, not the features.
+features (`NavPolicy.value`, trunk under `no_grad`), so the critic loss only reaches the value head and
+never the shared trunk. (`separate_losses` must stay False: the critic wraps the whole policy module, so
+TorchRL would treat *every* critic parameter as shared with the actor and detach the value head too.)
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ class PPOConfig:
     frames_per_batch: int = 400        # per collector iteration
     epochs: int = 4
     minibatch_size: int = 100
-    lr: float = 1e-4
+    lr: float = 1e-4                   # policy (actor) learning rate
+    critic_lr: float = 1e-3            # value head: a fresh critic must catch up with a pretrained actor
     gamma: float = 0.99                # the paper's
     lmbda: float = 0.95
     clip_epsilon: float = 0.2
@@ -54,6 +56,7 @@ class PPOConfig:
     normalize_advantage: bool = True
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
     freeze_encoder: bool = True        # the paper updates only the policy: image encoders stay fixed in RL
+    critic_warmup_iters: int = 0       # first iterations update only the value head (see PPOTrainer.update)
 
     def __post_init__(self):
         if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
@@ -101,6 +104,21 @@ def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: in
     return c
 
 
+def env_episode_metrics(collector) -> dict[str, float]:
+    """NE / SR / SPL / IR of the episodes the collector's env finished (single-process collector and an env
+    with `pop_finished_metrics`, i.e. NavEnv). Popping also keeps the env's record list from growing."""
+    env = getattr(collector, "env", None)
+    if env is None or not hasattr(env, "pop_finished_metrics"):
+        return {}
+    finished = env.pop_finished_metrics()
+    if not finished:
+        return {}
+    from wanderland_nav.envs.metrics import aggregate_metrics
+
+    o = aggregate_metrics(finished)["overall"]
+    return {"train/episodes": o["episodes"], **{f"train/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}}
+
+
 def episode_stats(batch: TensorDictBase) -> dict[str, float]:
     """SR / IR / NE / return over the episodes that ended inside a collected batch `[..., T]`."""
     nxt = batch.get("next")
@@ -134,13 +152,17 @@ class PPOTrainer:
         self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=cfg.clip_epsilon,
                                 entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
                                 critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
-                                normalize_advantage=cfg.normalize_advantage, separate_losses=True)
+                                normalize_advantage=cfg.normalize_advantage, separate_losses=False)
         self.loss.set_keys(action=K.ACTION, sample_log_prob=K.ACTION_LOG_PROB, value=K.STATE_VALUE,
                            reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
         self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=self.critic, average_gae=False,
                        deactivate_vmap=True)  # conv + GroupNorm are not vmap-able
         self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
-        self.optim = torch.optim.Adam(policy.trainable_parameters(), lr=cfg.lr)
+        head = {id(p) for p in policy.value_head.parameters()}
+        self.optim = torch.optim.Adam([
+            {"params": [p for p in policy.trainable_parameters() if id(p) not in head], "lr": cfg.lr},
+            {"params": list(policy.value_head.parameters()), "lr": cfg.critic_lr},
+        ])
         self.iteration, self.frames = 0, 0
 
     # -------------------------------------------------------------- checkpoints
@@ -163,7 +185,11 @@ class PPOTrainer:
 
     # -------------------------------------------------------------- one update
     def update(self, batch: TensorDictBase) -> dict[str, float]:
+        """GAE then minibatch epochs of ClipPPOLoss. During the first `critic_warmup_iters` iterations only
+        the critic loss is applied: a fresh value head gives near-random advantages, and policy-gradient
+        steps on them would move a behaviour-cloned policy away from its demonstrations for nothing."""
         cfg = self.cfg
+        warmup = self.iteration < cfg.critic_warmup_iters
         # the actor also wrote STATE_VALUE at the root (not in "next"): drop it so GAE recomputes both
         batch = batch.exclude(K.STATE_VALUE)
         with torch.no_grad():
@@ -178,7 +204,8 @@ class PPOTrainer:
             for start in range(0, n - cfg.minibatch_size + 1, cfg.minibatch_size):
                 mb = flat[perm[start:start + cfg.minibatch_size]]
                 out = self.loss(mb)
-                total = out["loss_objective"] + out["loss_critic"] + out.get("loss_entropy", 0.0)
+                total = out["loss_critic"] if warmup else (
+                    out["loss_objective"] + out["loss_critic"] + out.get("loss_entropy", 0.0))
                 self.optim.zero_grad(set_to_none=True)
                 total.backward()
                 gn = torch.nn.utils.clip_grad_norm_(self.policy.trainable_parameters(), cfg.max_grad_norm)
@@ -194,13 +221,15 @@ class PPOTrainer:
                 for k, v in stats.items():
                     sums[k] = sums.get(k, 0.0) + float(torch.as_tensor(v).detach().float().mean())
                 count += 1
-                if cfg.target_kl is not None and float(out["kl_approx"].detach().abs().mean()) > cfg.target_kl:
+                if (not warmup and cfg.target_kl is not None
+                        and float(out["kl_approx"].detach().abs().mean()) > cfg.target_kl):
                     stop = True
                     break
             if stop:
                 break
         res = {k: v / max(count, 1) for k, v in sums.items()}
         res["losses/epochs_done"] = epoch + 1
+        res["losses/critic_warmup"] = float(warmup)
         res["losses/std_mean"] = float(self.policy.scale().detach().mean())
         return res
 
@@ -224,6 +253,7 @@ class PPOTrainer:
                 t0 = time.perf_counter()
                 self.policy.train()
                 stats = episode_stats(batch)
+                stats.update(env_episode_metrics(collector))   # adds SPL where the env can say
                 stats.update(self.update(batch))
                 dt_update = time.perf_counter() - t0
                 self.frames += batch.numel()
