@@ -7,20 +7,22 @@ Semantics (gsplat 1.5, per pixel with centre (x+0.5, y+0.5), Gaussians in increa
     out = sum_j alpha_j T_j c_j      (background blending happens in `api.py`)
 
 How it is fast in pure torch:
-* Tile lists come from one radix sort of int64 keys (tile, depth rank); no float sort of M keys.
-* sigma - log(o) is a quadratic form in tile-local pixel coordinates, so one GEMM
-  `feat[P,6] @ q[6,L]` evaluates a whole chunk of L Gaussians for all P pixels of a tile; the
-  colour sum is a second batched GEMM. Tile-local coordinates (|u| <= tile/2) keep the expansion
-  well conditioned in float32.
-* Work proceeds in chunks of L Gaussians per tile over a group of tiles, sized so the working set
-  (`chunk_elems` floats per temporary) is bounded whatever N, C or the image size.
-* Tiles leave the active set when their list is exhausted or (CPU) every pixel has terminated.
+* Tile lists come from two integer radix sorts (Gaussians by the bits of their depth, then pairs by
+  tile id, stable), never a float sort of all pairs.
+* -(sigma - log o) is a quadratic form in tile-local pixel coordinates (u, v); it is separable on the
+  tile grid, so a chunk of L Gaussians is evaluated for all P pixels of Ta tiles with two full-size
+  passes plus one exp. Small CPU tiles (4x4 by default) waste few evaluations on small splats.
+  Tile-local coordinates (|u| <= tile/2) keep the expansion well conditioned in float32.
+* Work proceeds in chunks of L Gaussians per tile over a group of tiles, sized so that every
+  temporary holds at most `chunk_elems` values: memory is bounded whatever N, C or the image size.
+* CPU: tiles leave the active set when their list is exhausted or every pixel has terminated.
 * The backward recomputes alpha/transmittance chunk by chunk front to back, using the saved output
-  image for the "what lies behind" sums, so nothing per pixel-Gaussian pair is ever stored.
+  image for the "what lies behind" sums, so nothing per pixel-Gaussian pair is ever stored; the
+  per-pixel sums over each Gaussian's six quadratic coefficients are one K=P GEMM.
 
-Device notes: the plan (tile groups, chunk lengths, list exhaustion) is computed on the host from
-one copy of the per-tile counts; on CUDA the chunk loop then runs without host syncs (transmittance
-termination is handled by masks only, not by compaction).
+Device notes: the plan (tile groups, list extents) is computed on the host from one copy of the
+per-tile counts; on CUDA the chunk loop then runs without host syncs ("masked" schedule: fixed
+chunk length, termination by masks only). dtype and device always follow the inputs.
 """
 
 from __future__ import annotations
@@ -96,7 +98,7 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
 
 # --------------------------------------------------------------------------------------------
 # Chunk kernels (shared by forward and backward). Layout: pixels first, [P, Ta, L], so that the
-# quadratic form of a whole chunk is ONE GEMM feat[P,6] @ q[6, Ta*L].
+# per-pixel reductions of the backward are one GEMM feat^T[6,P] @ dA[P, Ta*L].
 # --------------------------------------------------------------------------------------------
 def _pixel_features(tile_size: int, dtype, device) -> torch.Tensor:
     """[P, 6] monomials (u^2, v^2, uv, u, v, 1) of tile-local pixel-centre coordinates, P = ts^2 row-major."""
@@ -189,7 +191,6 @@ class _Plan:
         self.chunk_elems = chunk_elems
         self.min_chunk = min_chunk
         self.pixels = pixels
-
 
 
 class _Cursor:
