@@ -10,10 +10,35 @@ with several overlapping levels the same formula runs with triangle walks instea
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from planners.path import _located, _visible_to_nodes
 from planners.visibility import VisPolys, tangent_ok, visible
+
+
+def _cross_lin(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """cross(a - p, b - p) = cross(a, b) + p_x (a_y - b_y) - p_y (a_x - b_x), as `[3,M]` coefficients
+    of (p_x, p_y, 1) for corner pairs a[M,2], b[M,2]."""
+    return np.stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
+
+
+_N_BINS = 256  # angular bins per visibility-polygon source (lookup acceleration)
+_NUMPY_OF = {torch.float16: np.float16, torch.float32: np.float32, torch.float64: np.float64}
+_TORCH_OF = {np.dtype(v): k for k, v in _NUMPY_OF.items()}
+
+
+def _combined_vis(corners: VisPolys, goals: VisPolys, M: int):
+    """One sorted key/hit table for corner and goal visibility polygons (goal g keyed as source M + g),
+    so a lookup tests both kinds of sources in one pass. numpy (keys, hit x, hit y, source x, source y)."""
+    keys = np.concatenate([corners.keys.numpy(), goals.keys.numpy() + 32.0 * M])
+    hits = np.concatenate([corners.hits.numpy().reshape(-1, 2), goals.hits.numpy().reshape(-1, 2)])
+    srcs = np.concatenate([corners.src_xy.numpy().reshape(-1, 2), goals.src_xy.numpy().reshape(-1, 2)])
+    # per source and angular bin: index of the first key >= the bin's lower edge (sorted queries: cheap)
+    edges = -np.pi + 2 * np.pi * np.arange(_N_BINS + 1) / _N_BINS
+    bucket = np.searchsorted(keys, (np.arange(len(srcs))[:, None] * 32 + 16.0 + edges[None]).reshape(-1))
+    return (keys, np.ascontiguousarray(hits[:, 0]), np.ascontiguousarray(hits[:, 1]),
+            np.ascontiguousarray(srcs[:, 0]), np.ascontiguousarray(srcs[:, 1]), bucket)
 
 
 class GeodesicField:
@@ -26,6 +51,7 @@ class GeodesicField:
         self.goal_island = goal_island  # [G]
         self.corner_to_goal = corner_to_goal  # [G,M] float64
         self.goal_vis = goal_vis
+        self._prepare_np()
 
     @classmethod
     def build(cls, nm, goals, max_distance: float | None = None) -> "GeodesicField":
@@ -51,20 +77,37 @@ class GeodesicField:
 
         Output dtype follows `points` (float32 for non-float input); inf where the point is on
         another island than its goal."""
+        # numpy inside: converting at the boundary costs a few us, each small torch op ~5-10 us
+        if not isinstance(points, (torch.Tensor, np.ndarray)):
+            points = torch.as_tensor(points)
+        if isinstance(points, torch.Tensor):
+            out_dtype = points.dtype if points.is_floating_point() else torch.float32
+            device = points.device  # the navmesh lives on the CPU; results go back where the points came from
+            shape = points.shape[:-1]
+            p = (points if device.type == "cpu" else points.cpu()).detach().numpy()
+        else:
+            p = points
+            out_dtype = _TORCH_OF.get(p.dtype, torch.float32)
+            device, shape = None, p.shape[:-1]
+        if isinstance(goal_index, torch.Tensor):
+            goal_index = goal_index.cpu() if goal_index.device.type != "cpu" else goal_index
+            goal_index = goal_index.numpy()
+        gi = np.asarray(goal_index).astype(np.int64, copy=False).reshape(-1)
         nm = self.nm
-        p = torch.as_tensor(points)
-        out_dtype = p.dtype if p.is_floating_point() else torch.float32
-        device = p.device  # the navmesh lives on the CPU; results go back where the points came from
-        p = p.cpu()
-        gi = torch.as_tensor(goal_index, dtype=torch.long).reshape(-1).cpu()
-        loc = nm.to_local(p.reshape(-1, 3).double())
+        loc = p.reshape(-1, 3).astype(np.float64, copy=False) @ self._np["R_T"] - self._np["bmin"]  # [B,3] local
         if gi.shape[0] != loc.shape[0]:
             raise ValueError(f"GeodesicField.lookup: {loc.shape[0]} points but {gi.shape[0]} goal indices")
-        d = self._lookup_simple(loc, gi)
-        general = ~self._goal_simple[gi]
-        if general.any():  # goals on islands with overlapping levels: triangle walks
-            d[general] = self._lookup_general(loc[general], gi[general])
-        return d.to(out_dtype).reshape(p.shape[:-1]).to(device)
+        general = ~self._goal_simple_np[gi]
+        if not general.any():
+            d = self._lookup_simple(loc, gi)
+        else:  # goals on islands with overlapping levels: triangle walks
+            d = np.empty(loc.shape[0])
+            d[~general] = self._lookup_simple(loc[~general], gi[~general])
+            d[general] = self._lookup_general(torch.from_numpy(loc[general]),
+                                              torch.from_numpy(gi[general])).numpy()
+        np_dtype = _NUMPY_OF.get(out_dtype)
+        out = torch.from_numpy(d.astype(np_dtype).reshape(shape)) if np_dtype else torch.from_numpy(d).to(out_dtype).reshape(shape)
+        return out if device is None or device.type == "cpu" else out.to(device)
 
     @property
     def _goal_simple(self) -> torch.Tensor:
@@ -73,40 +116,201 @@ class GeodesicField:
             nm = self.nm
             isl = self.goal_island.clamp_min(0)
             ok = nm.walls.simple[isl] & (self.goal_island >= 0) & self.goal_vis.ok
+            n_isl = nm.walls.simple.shape[0]
             node_isl = nm._t["node_island"]
-            for g in torch.nonzero(ok)[:, 0].tolist():
-                ok[g] = bool(nm.vispolys.ok[node_isl == isl[g]].all())
-            self._goal_simple_cache = ok
+            # islands where some corner lacks a visibility polygon
+            lacking = torch.zeros(n_isl + 1, dtype=torch.bool)
+            lacking[node_isl[~nm.vispolys.ok].clamp(0, n_isl)] = True
+            self._goal_simple_cache = ok & ~lacking[isl]
         return self._goal_simple_cache
 
-    def _lookup_simple(self, loc, gi):
-        """Fast path for goals on single-level islands: ~60 tensor ops for any B, no Python loops."""
+    # first round of the corner search: the K cheapest candidates per point (by |p a| + d(a, g));
+    # the first visible one in that order is the exact minimum, most points stop here
+    ROUND_K = 8
+
+    def _prepare_np(self):
+        """numpy copies of the per-goal tables: lookups are small batches where numpy's per-call
+        overhead (~1 us) beats torch's (~5-10 us) and dominates the cost."""
         nm = self.nm
         t = nm._t
-        xy = loc[:, :2]
-        isl = nm._island_by_column(loc)
-        miss = isl < 0
-        if miss.any():  # on a sliver the contour simplification added beyond the raster: use triangles
-            tri = nm._locate_local(loc[miss], max(0.5, nm.settings.agent_max_climb))
-            bad = tri < 0
-            if bad.any():
-                tri[bad] = nm._snap_local(loc[miss][bad], None)[0]
-            isl[miss] = t["tri_island"][tri]
-        gxy = self.goal_xy[gi]
-        d = torch.where(self.goal_vis.sees(gi, xy), (xy - gxy).norm(dim=1), torch.inf)
-        M = t["node_xy"].shape[0]
-        if M:
-            # only corners a path can bend around (tangent) and that lead to the goal are tested
-            c2g = self.corner_to_goal[gi]  # [B,M]
-            cand = torch.isfinite(c2g) & tangent_ok(xy[:, None, :], t["node_xy"], t["node_prev"], t["node_next"],
-                                                    t["node_tangent"])
-            bi, mi = torch.nonzero(cand, as_tuple=True)
-            seen = nm.vispolys.sees(mi, xy[bi])
-            bi, mi = bi[seen], mi[seen]
-            val = (xy[bi] - t["node_xy"][mi]).norm(dim=1) + c2g[bi, mi]
-            via = torch.full((xy.shape[0],), torch.inf, dtype=torch.float64).scatter_reduce(0, bi, val, "amin")
-            d = torch.minimum(d, via)
-        return torch.where(isl == self.goal_island[gi], d, torch.inf)
+        a = t["node_xy"].numpy()  # [M,2]
+        c2g = self.corner_to_goal.numpy()
+        prev, nxt = t["node_prev"].numpy(), t["node_next"].numpy()
+        M = a.shape[0]
+        gxy = self.goal_xy.numpy()
+        tang = t["node_tangent"].numpy()[None]
+        self._np = {
+            "M": M, "goal_island": self.goal_island.numpy(),
+            "c2g": c2g, "c2g_fin": np.isfinite(c2g),
+            "src_x": np.concatenate([a[:, 0], gxy[:, 0]]), "src_y": np.concatenate([a[:, 1], gxy[:, 1]]),
+            # [3,3,M+G]: coefficients of (p_x, p_y, 1) for cross(s-p, prev-p), cross(s-p, next-p) (zero for
+            # goals and corners that need no tangency: never masked) and |s|^2 - 2 s.p, per source s
+            "lin": np.concatenate([
+                np.stack([_cross_lin(a, prev), _cross_lin(a, nxt) * tang,
+                          np.stack([-2 * a[:, 0], -2 * a[:, 1], (a * a).sum(1)])], 1),
+                np.stack([np.zeros((3, len(gxy))), np.zeros((3, len(gxy))),
+                          np.stack([-2 * gxy[:, 0], -2 * gxy[:, 1], (gxy * gxy).sum(1)])], 1)], 2),
+            "vis": _combined_vis(nm.vispolys, self.goal_vis, M),
+            "span_floor": t["span_floor"].numpy(), "span_island": t["span_island"].numpy(),
+            "R_T": nm.R_t.numpy().T.copy(), "bmin": nm.bmin_t.numpy(),
+        }
+        self._cols_cache = {}
+        self._goal_simple_np = self._goal_simple.numpy()
+
+    def _island_np(self, loc):
+        """Island `[B]` of local points loc[B,3], as `NavMesh._island_by_column` (ambiguous columns and
+        slivers beyond the raster fall back to the torch path for those points only)."""
+        nm = self.nm
+        ix = np.floor(loc[:, 0] / nm.cs).astype(np.int64)
+        iy = np.floor(loc[:, 1] / nm.cs).astype(np.int64)
+        ing = (ix >= 0) & (iy >= 0) & (ix < nm.width) & (iy < nm.height)
+        isl = np.where(ing, nm.col_island[np.where(ing, ix + iy * nm.width, 0)], -1)
+        amb = np.flatnonzero(isl == -2)  # several levels in the column: the span nearest in height
+        if amb.shape[0]:
+            n = self._np
+            col = ix[amb] + iy[amb] * nm.width
+            st = nm.col_start[col]
+            cnt = nm.col_start[col + 1] - st
+            k = np.arange(max(nm.max_col_spans, 1))
+            valid = k[None] < cnt[:, None]
+            sidx = np.where(valid, st[:, None] + k[None], 0)
+            dz = np.where(valid, np.abs(loc[amb, 2:3] - n["span_floor"][sidx] * nm.ch), np.inf)
+            span = np.take_along_axis(sidx, dz.argmin(1)[:, None], 1)[:, 0]
+            isl[amb] = np.where(valid.any(1), n["span_island"][span], -1)
+        odd = isl < 0
+        if odd.any():
+            t = nm._t
+            lt = torch.from_numpy(loc[odd])
+            it = torch.from_numpy(isl[odd])
+            miss = it < 0
+            if miss.any():  # on a sliver the contour simplification added beyond the raster: use triangles
+                tri = nm._locate_local(lt[miss], max(0.5, nm.settings.agent_max_climb))
+                bad = tri < 0
+                if bad.any():
+                    tri[bad] = nm._snap_local(lt[miss][bad], None)[0]
+                it[miss] = t["tri_island"][tri]
+            isl[odd] = it.numpy()
+        return isl
+
+    def _candidates(self, gr):
+        """Candidate corners for rows with goals gr[R]: those leading to one of the goals (finite
+        corner_to_goal; one island's corners, not the whole level's). Returns src[S] (corner ids),
+        their tangency/distance coefficients `[3,3S]`, and the corner-to-goal distances (`[S]` when all
+        rows share one goal, else `[R,S]`, inf where a corner does not lead to the row's goal)."""
+        n = self._np
+        g0 = int(gr[0])
+        if (gr == g0).all():  # the common batch: one goal (or one per env, repeated)
+            hit = self._cols_cache.get(g0)
+            if hit is None:
+                src = np.flatnonzero(n["c2g_fin"][g0])
+                hit = self._cols_cache[g0] = (src, n["lin"][:, :, src].reshape(3, -1).copy(), n["c2g"][g0, src])
+            return hit
+        src = np.flatnonzero(n["c2g_fin"][np.unique(gr)].any(0))
+        return src, n["lin"][:, :, src].reshape(3, -1), n["c2g"][gr[:, None], src[None, :]]
+
+    def _lookup_simple(self, loc, gi):
+        """Goals on single-level islands, numpy, no Python loop over points.
+
+        d(p, g) = |p g| if p sees g, else min over the tangent corners a that p sees of |p a| + d(a, g).
+        Corners are searched in rounds: the K cheapest first (the first visible one in that order is
+        the minimum), then all remaining ones for the few points whose K were all hidden. Same
+        candidates and tests as a full scan, hence the same (exact) answer."""
+        n = self._np
+        B = loc.shape[0]
+        px, py = loc[:, 0], loc[:, 1]
+        d = np.full(B, np.inf)
+        rows = np.flatnonzero(self._island_np(loc) == n["goal_island"][gi])  # inf on other islands
+        if rows.shape[0] == 0:
+            return d
+        gr = gi[rows]
+        # |p g| <= |p a| + d(a, g) for every corner a: points that see their goal are done
+        direct = self._sees(n["M"] + gr, px[rows], py[rows])
+        dr = rows[direct]
+        d[dr] = np.hypot(px[dr] - n["src_x"][n["M"] + gi[dr]], py[dr] - n["src_y"][n["M"] + gi[dr]])
+        rows, gr = rows[~direct], gr[~direct]
+        if rows.shape[0] == 0:
+            return d
+        src, lin_c, c2g_c = self._candidates(gr)
+        S = src.shape[0]
+        if S == 0:
+            return d
+        qx, qy = px[rows], py[rows]
+        # both tangency cross products and |p a|^2 are affine/quadratic in p: one [R,3] @ [3,3S] product
+        # (rounding differs from the direct form by ~1e-12 m^2; the tangency test keeps a margin
+        # so near-collinear corners stay candidates, which can only add valid paths)
+        q3 = np.stack([qx, qy, np.ones_like(qx)], 1)  # [R,3]
+        lin = q3 @ lin_c  # [R,3S]
+        s1, s2, sq = lin[:, :S], lin[:, S:2 * S], lin[:, 2 * S:]
+        sq += (qx * qx + qy * qy)[:, None]  # |a|^2 - 2 a.p + |p|^2
+        np.maximum(sq, 0.0, out=sq)
+        val = np.sqrt(sq, out=sq)
+        val += c2g_c  # inf where the source does not lead to the goal
+        val[s1 * s2 < -1e-9] = np.inf  # only corners a path can bend around (s2 == 0 where no tangency is needed)
+        K = min(self.ROUND_K, S)
+        if 2 * K < S:
+            top = np.argpartition(val, K - 1, axis=1)[:, :K]  # [R,K]
+            tv = np.take_along_axis(val, top, 1)
+            o = np.argsort(tv, axis=1)
+            top, tv = np.take_along_axis(top, o, 1), np.take_along_axis(tv, o, 1)
+        else:
+            top = np.argsort(val, axis=1)
+            tv = np.take_along_axis(val, top, 1)
+        fin = np.isfinite(tv)
+        ri, ki = np.nonzero(fin)
+        seen = np.zeros(tv.shape, dtype=bool)
+        seen[ri, ki] = self._sees(src[top[ri, ki]], qx[ri], qy[ri])
+        hit = np.flatnonzero(seen.any(1))
+        self._exact(d, rows, hit, top[hit, seen[hit].argmax(1)], src, c2g_c, px, py)
+        if top.shape[1] < S:
+            rest = np.flatnonzero(~seen.any(1) & fin[:, -1])
+            if rest.shape[0]:  # the K cheapest all hidden: scan the remaining candidates of these points
+                vr = val[rest]
+                vr[np.arange(rest.shape[0])[:, None], top[rest]] = np.inf
+                ri, ci = np.nonzero(np.isfinite(vr))
+                ok = self._sees(src[ci], qx[rest[ri]], qy[rest[ri]])
+                ri, ci = ri[ok], ci[ok]
+                best = np.full(rest.shape[0], np.inf)
+                np.minimum.at(best, ri, vr[ri, ci])
+                # the exact value of each row's best (ranked by the product above)
+                r2 = np.flatnonzero(np.isfinite(best))
+                vbest = np.where(vr[ri, ci] == best[ri], ci, -1)
+                pick = np.full(rest.shape[0], -1)
+                np.maximum.at(pick, ri, vbest)
+                self._exact(d, rows, rest[r2], pick[r2], src, c2g_c, px, py)
+        return d
+
+    def _sees(self, src, qx, qy):
+        """Visibility of points q[R] from combined sources src[R] (corner m < M, goal M + g), numpy,
+        the same test as `VisPolys.sees`. The fan edge bracketing q's angle is found from a per-source
+        angular bucket table plus two forward steps (a global binary search over every fan is ~17
+        cache misses per point and was the largest cost of a lookup)."""
+        keys, hx, hy, sx, sy, bucket = self._np["vis"]
+        L = keys.shape[0]
+        if L < 2 or qx.shape[0] == 0:
+            return np.zeros(qx.shape[0], dtype=bool)
+        th = np.arctan2(qy - sy[src], qx - sx[src])
+        key = th + (src * 32 + 16.0)
+        b = ((th + np.pi) * (_N_BINS / (2 * np.pi))).astype(np.int64)
+        np.clip(b, 0, _N_BINS - 1, out=b)
+        i1 = bucket[src * (_N_BINS + 1) + b]  # first key >= the bin's lower edge: <= the answer
+        for _ in range(2):
+            i1 += keys[np.minimum(i1, L - 1)] < key
+        late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
+        if late.shape[0]:
+            i1[late] = np.searchsorted(keys, key[late])
+        np.clip(i1, 1, L - 1, out=i1)
+        i0 = i1 - 1
+        x0, y0 = hx[i0], hy[i0]
+        ex, ey = hx[i1] - x0, hy[i1] - y0
+        return ex * (qy - y0) - ey * (qx - x0) >= -1e-9 * (np.abs(ex) + np.abs(ey))
+
+    def _exact(self, d, rows, r, c, src, c2g_c, px, py):
+        """d[rows[r]] = |p s| + d(s, g) for chosen columns c[k] of rows r[k], in the direct form."""
+        n = self._np
+        rr = rows[r]
+        s = src[c]
+        g = c2g_c[c] if c2g_c.ndim == 1 else c2g_c[r, c]
+        d[rr] = np.hypot(px[rr] - n["src_x"][s], py[rr] - n["src_y"][s]) + g
 
     def _lookup_general(self, loc, gi):
         """Any navmesh (islands with overlapping levels walk the triangles)."""
