@@ -60,7 +60,7 @@ class ConsoleCSVLogger:
         if self.path is None:
             return
         buf = io.StringIO()
-        w = csv.writer(buf)
+        w = csv.writer(buf, lineterminator="\n")
         w.writerow(["step", "key", "value"])
         w.writerows(self.rows)
         atomic_write_text(self.path, buf.getvalue())
