@@ -143,13 +143,11 @@ class GeodesicField:
             "M": M, "goal_island": self.goal_island.numpy(),
             "c2g": c2g, "c2g_fin": np.isfinite(c2g),
             "src_x": np.concatenate([a[:, 0], gxy[:, 0]]), "src_y": np.concatenate([a[:, 1], gxy[:, 1]]),
-            # [3,3,M+G]: coefficients of (p_x, p_y, 1) for cross(s-p, prev-p), cross(s-p, next-p) (zero for
-            # goals and corners that need no tangency: never masked) and |s|^2 - 2 s.p, per source s
-            "lin": np.concatenate([
-                np.stack([_cross_lin(a, prev), _cross_lin(a, nxt) * tang,
-                          np.stack([-2 * a[:, 0], -2 * a[:, 1], (a * a).sum(1)])], 1),
-                np.stack([np.zeros((3, len(gxy))), np.zeros((3, len(gxy))),
-                          np.stack([-2 * gxy[:, 0], -2 * gxy[:, 1], (gxy * gxy).sum(1)])], 1)], 2),
+            # [4,3,M]: coefficients of (p_x, p_y, 1, |p|^2) for cross(a-p, prev-p), cross(a-p, next-p) (zero
+            # for corners that need no tangency: never masked) and |a - p|^2, per corner a
+            "lin": np.stack([np.concatenate([_cross_lin(a, prev), np.zeros((1, M))]),
+                             np.concatenate([_cross_lin(a, nxt) * tang, np.zeros((1, M))]),
+                             np.stack([-2 * a[:, 0], -2 * a[:, 1], (a * a).sum(1), np.ones(M)])], 1),
             "vis": _combined_vis(nm.vispolys, self.goal_vis, M),
             "span_floor": t["span_floor"].numpy(), "span_island": t["span_island"].numpy(),
             "R_T": nm.R_t.numpy().T.copy(), "bmin": nm.bmin_t.numpy(),
@@ -195,7 +193,7 @@ class GeodesicField:
     def _candidates(self, gr):
         """Candidate corners for rows with goals gr[R]: those leading to one of the goals (finite
         corner_to_goal; one island's corners, not the whole level's). Returns src[S] (corner ids),
-        their tangency/distance coefficients `[3,3S]`, and the corner-to-goal distances (`[S]` when all
+        their tangency/distance coefficients `[4,3S]`, and the corner-to-goal distances (`[S]` when all
         rows share one goal, else `[R,S]`, inf where a corner does not lead to the row's goal)."""
         n = self._np
         g0 = int(gr[0])
@@ -203,10 +201,10 @@ class GeodesicField:
             hit = self._cols_cache.get(g0)
             if hit is None:
                 src = np.flatnonzero(n["c2g_fin"][g0])
-                hit = self._cols_cache[g0] = (src, n["lin"][:, :, src].reshape(3, -1).copy(), n["c2g"][g0, src])
+                hit = self._cols_cache[g0] = (src, n["lin"][:, :, src].reshape(4, -1).copy(), n["c2g"][g0, src])
             return hit
         src = np.flatnonzero(n["c2g_fin"][np.unique(gr)].any(0))
-        return src, n["lin"][:, :, src].reshape(3, -1), n["c2g"][gr[:, None], src[None, :]]
+        return src, n["lin"][:, :, src].reshape(4, -1), n["c2g"][gr[:, None], src[None, :]]
 
     def _lookup_simple(self, loc, gi):
         """Goals on single-level islands, numpy, no Python loop over points.
@@ -224,9 +222,9 @@ class GeodesicField:
             return d
         gr = gi[rows]
         # |p g| <= |p a| + d(a, g) for every corner a: points that see their goal are done
-        direct = self._sees(n["M"] + gr, px[rows], py[rows])
-        dr = rows[direct]
-        d[dr] = np.hypot(px[dr] - n["src_x"][n["M"] + gi[dr]], py[dr] - n["src_y"][n["M"] + gi[dr]])
+        gsrc = n["M"] + gr  # the goals as visibility sources
+        direct = self._sees(gsrc, px[rows], py[rows])
+        self._exact(d, rows, np.flatnonzero(direct), None, gsrc[direct], None, px, py)
         rows, gr = rows[~direct], gr[~direct]
         if rows.shape[0] == 0:
             return d
@@ -234,49 +232,43 @@ class GeodesicField:
         S = src.shape[0]
         if S == 0:
             return d
+        R = rows.shape[0]
         qx, qy = px[rows], py[rows]
-        # both tangency cross products and |p a|^2 are affine/quadratic in p: one [R,3] @ [3,3S] product
+        # both tangency cross products and |p a|^2 are affine/quadratic in p: one [R,4] @ [4,3S] product
         # (rounding differs from the direct form by ~1e-12 m^2; the tangency test keeps a margin
         # so near-collinear corners stay candidates, which can only add valid paths)
-        q3 = np.stack([qx, qy, np.ones_like(qx)], 1)  # [R,3]
-        lin = q3 @ lin_c  # [R,3S]
+        q4 = np.empty((R, 4))
+        q4[:, 0], q4[:, 1], q4[:, 2], q4[:, 3] = qx, qy, 1.0, qx * qx + qy * qy
+        lin = q4 @ lin_c  # [R,3S]: cross(a-p, prev-p), cross(a-p, next-p), |a - p|^2
         s1, s2, sq = lin[:, :S], lin[:, S:2 * S], lin[:, 2 * S:]
-        sq += (qx * qx + qy * qy)[:, None]  # |a|^2 - 2 a.p + |p|^2
         np.maximum(sq, 0.0, out=sq)
         val = np.sqrt(sq, out=sq)
-        val += c2g_c  # inf where the source does not lead to the goal
-        val[s1 * s2 < -1e-9] = np.inf  # only corners a path can bend around (s2 == 0 where no tangency is needed)
+        val += c2g_c  # inf where the corner does not lead to the goal
+        np.multiply(s1, s2, out=s1)
+        np.copyto(val, np.inf, where=s1 < -1e-9)  # only corners a path can bend around (s2 == 0: no tangency needed)
         K = min(self.ROUND_K, S)
-        if 2 * K < S:
-            top = np.argpartition(val, K - 1, axis=1)[:, :K]  # [R,K]
-            tv = np.take_along_axis(val, top, 1)
-            o = np.argsort(tv, axis=1)
-            top, tv = np.take_along_axis(top, o, 1), np.take_along_axis(tv, o, 1)
-        else:
-            top = np.argsort(val, axis=1)
-            tv = np.take_along_axis(val, top, 1)
+        top = np.argpartition(val, K - 1, axis=1)[:, :K] if K < S else np.broadcast_to(np.arange(S), (R, S))
+        tv = np.take_along_axis(val, top, 1)  # [R,K] the K cheapest, unordered
         fin = np.isfinite(tv)
         ri, ki = np.nonzero(fin)
-        seen = np.zeros(tv.shape, dtype=bool)
-        seen[ri, ki] = self._sees(src[top[ri, ki]], qx[ri], qy[ri])
-        hit = np.flatnonzero(seen.any(1))
-        self._exact(d, rows, hit, top[hit, seen[hit].argmax(1)], src, c2g_c, px, py)
-        if top.shape[1] < S:
-            rest = np.flatnonzero(~seen.any(1) & fin[:, -1])
-            if rest.shape[0]:  # the K cheapest all hidden: scan the remaining candidates of these points
+        seen = self._sees(src[top[ri, ki]], qx[ri], qy[ri])
+        tv[ri[~seen], ki[~seen]] = np.inf  # hidden corners out
+        j = tv.argmin(1)
+        found = np.isfinite(tv[np.arange(R), j])
+        hit = np.flatnonzero(found)
+        # if one of the K cheapest is seen, the cheapest seen one is the minimum over all seen corners
+        self._exact(d, rows, hit, top[hit, j[hit]], src, c2g_c, px, py)
+        if K < S:
+            rest = np.flatnonzero(~found & fin.all(1))
+            if rest.shape[0]:  # the K cheapest all hidden (and more candidates exist): scan the remaining ones
                 vr = val[rest]
                 vr[np.arange(rest.shape[0])[:, None], top[rest]] = np.inf
                 ri, ci = np.nonzero(np.isfinite(vr))
                 ok = self._sees(src[ci], qx[rest[ri]], qy[rest[ri]])
-                ri, ci = ri[ok], ci[ok]
-                best = np.full(rest.shape[0], np.inf)
-                np.minimum.at(best, ri, vr[ri, ci])
-                # the exact value of each row's best (ranked by the product above)
-                r2 = np.flatnonzero(np.isfinite(best))
-                vbest = np.where(vr[ri, ci] == best[ri], ci, -1)
-                pick = np.full(rest.shape[0], -1)
-                np.maximum.at(pick, ri, vbest)
-                self._exact(d, rows, rest[r2], pick[r2], src, c2g_c, px, py)
+                vr[ri[~ok], ci[~ok]] = np.inf  # hidden corners out
+                j2 = vr.argmin(1)
+                r2 = np.flatnonzero(np.isfinite(vr[np.arange(rest.shape[0]), j2]))
+                self._exact(d, rows, rest[r2], j2[r2], src, c2g_c, px, py)
         return d
 
     def _sees(self, src, qx, qy):
@@ -305,9 +297,13 @@ class GeodesicField:
         return ex * (qy - y0) - ey * (qx - x0) >= -1e-9 * (np.abs(ex) + np.abs(ey))
 
     def _exact(self, d, rows, r, c, src, c2g_c, px, py):
-        """d[rows[r]] = |p s| + d(s, g) for chosen columns c[k] of rows r[k], in the direct form."""
+        """d[rows[r]] = |p s| + d(s, g) for sources src[c[k]] of rows r[k], in the direct form
+        (c None: src[k] are the rows' goals, d(s, g) = 0)."""
         n = self._np
         rr = rows[r]
+        if c is None:
+            d[rr] = np.hypot(px[rr] - n["src_x"][src], py[rr] - n["src_y"][src])
+            return
         s = src[c]
         g = c2g_c[c] if c2g_c.ndim == 1 else c2g_c[r, c]
         d[rr] = np.hypot(px[rr] - n["src_x"][s], py[rr] - n["src_y"][s]) + g
