@@ -1,6 +1,6 @@
 """Navmesh benchmark on the three shared Recast test levels (prints figures; not a test).
 
-    python experiments/bench_navmesh.py [--threads 1] [--pairs 200] [--levels dungeon nav_test undulating]
+    python experiments/bench_navmesh.py [--cpu] [--threads 1] [--pairs 200] [--levels dungeon nav_test undulating]
 
 Reports per level: bake time, walkable area / islands / triangles / corners, find_path median,
 batched geodesic_distance throughput, distance-field build time, field lookup and
