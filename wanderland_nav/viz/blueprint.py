@@ -26,6 +26,8 @@ def default_blueprint(*, agent: int = 0, camera: bool = True, plots: bool = True
             rrb.TimeSeriesView(origin="eval", name="eval NE/SR/SPL/IR"),
             rrb.TimeSeriesView(origin="losses", name="losses"),
             rrb.TimeSeriesView(origin="train", name="train"),
+            rrb.TimeSeriesView(origin="bc", name="behaviour cloning"),
+            rrb.TimeSeriesView(origin="rollouts", name="rollout rewards / distances"),
             rrb.TimeSeriesView(origin="time", name="time"),
         ))
     main = rrb.Spatial3DView(origin="world", name="scene")

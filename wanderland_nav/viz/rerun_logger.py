@@ -43,7 +43,7 @@ class RerunLogger:
         self.path = Path(out_dir) / file_name if out_dir is not None else None
         rid = recording_id or (Path(out_dir).resolve().name if out_dir is not None else "run")
         self.rec = rr.RecordingStream(application_id, recording_id=rid)
-        bp = default_blueprint(training=True)
+        bp = default_blueprint(training=True, camera=False, plots=False)  # rollouts sit under world/rollouts/<tag>
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.rec.save(str(self.path), default_blueprint=bp)
