@@ -7,7 +7,11 @@ import sys
 from pathlib import Path
 
 import pytest
-import torch
+
+# Idle OpenMP threads sleep instead of spinning: on a loaded machine spinning threads made CPU
+# splat renders 40-150x slower (experiments/gsfit_depth_ablation). Must be set before torch loads.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import torch  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 # pytest puts tests/ on sys.path, where tests/policies (and tests/planners) would shadow the editable-installed
