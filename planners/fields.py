@@ -127,6 +127,7 @@ class GeodesicField:
     # first round of the corner search: the K cheapest candidates per point (by |p a| + d(a, g));
     # the first visible one in that order is the exact minimum, most points stop here
     ROUND_K = 8
+    SMALL_SEARCH = 1024  # up to this many points per visibility test, a plain searchsorted (fewer calls)
 
     def _prepare_np(self):
         """numpy copies of the per-goal tables: lookups are small batches where numpy's per-call
@@ -273,23 +274,27 @@ class GeodesicField:
 
     def _sees(self, src, qx, qy):
         """Visibility of points q[R] from combined sources src[R] (corner m < M, goal M + g), numpy,
-        the same test as `VisPolys.sees`. The fan edge bracketing q's angle is found from a per-source
-        angular bucket table plus two forward steps (a global binary search over every fan is ~17
-        cache misses per point and was the largest cost of a lookup)."""
+        the same test as `VisPolys.sees`. For many points the fan edge bracketing q's angle is found
+        from a per-source angular bucket table plus two forward steps (a global binary search over
+        every fan is ~17 cache misses per point: the largest cost of a 256-point lookup); for a few
+        hundred points one np.searchsorted is cheaper (fewer calls)."""
         keys, hx, hy, sx, sy, bucket = self._np["vis"]
         L = keys.shape[0]
         if L < 2 or qx.shape[0] == 0:
             return np.zeros(qx.shape[0], dtype=bool)
         th = np.arctan2(qy - sy[src], qx - sx[src])
         key = th + (src * 32 + 16.0)
-        b = ((th + np.pi) * (_N_BINS / (2 * np.pi))).astype(np.int64)
-        np.clip(b, 0, _N_BINS - 1, out=b)
-        i1 = bucket[src * (_N_BINS + 1) + b]  # first key >= the bin's lower edge: <= the answer
-        for _ in range(2):
-            i1 += keys[np.minimum(i1, L - 1)] < key
-        late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
-        if late.shape[0]:
-            i1[late] = np.searchsorted(keys, key[late])
+        if key.shape[0] <= self.SMALL_SEARCH:  # few points: one binary search costs fewer calls
+            i1 = np.searchsorted(keys, key)
+        else:
+            b = ((th + np.pi) * (_N_BINS / (2 * np.pi))).astype(np.int64)
+            np.clip(b, 0, _N_BINS - 1, out=b)
+            i1 = bucket[src * (_N_BINS + 1) + b]  # first key >= the bin's lower edge: <= the answer
+            for _ in range(2):
+                i1 += keys[np.minimum(i1, L - 1)] < key
+            late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
+            if late.shape[0]:
+                i1[late] = np.searchsorted(keys, key[late])
         np.clip(i1, 1, L - 1, out=i1)
         i0 = i1 - 1
         x0, y0 = hx[i0], hy[i0]
