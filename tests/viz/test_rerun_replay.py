@@ -208,10 +208,11 @@ def test_rerun_logger_protocol(recorded, tmp_path):
     assert isinstance(lg, Logger)
     for i in range(3):
         lg.log_scalars({"losses/objective": 0.5 - 0.1 * i, "eval/SR": 0.25 * i, "eval/NE": float("nan")}, step=8 * i)
-    for i in range(3):  # every other rollout is logged: calls 1 and 3
+    for i in range(3):  # every other rollout per tag is logged: calls 1 and 3 of "eval"
         lg.log_rollout(ro, step=8 * i, tag="eval")
+    lg.log_rollout(ro, step=24, tag="BC")  # a tag's first call is always logged
     lg.close()
-    assert lg.rollouts_logged == 2
+    assert lg.rollouts_logged == 3
     sc = scalar_entities(tmp_path / "rerun.rrd")
     np.testing.assert_allclose(sc["losses/objective"], [0.5, 0.4, 0.3])
     assert "eval/NE" not in sc  # non-finite values are skipped
@@ -253,7 +254,7 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     # the training logger places a collector-style batch in the scene once a Rollout gave it the frame
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
-    lg = RerunLogger(tmp_path, scene=False)
+    lg = RerunLogger(tmp_path, scene=False, rollout_every=1)
     lg.log_rollout(th.stack(steps, 1), step=0, tag="train")  # no frame known yet: nav-frame space
     lg.log_rollout(ro, step=1, tag="eval")
     lg.log_rollout(th.stack(steps, 1), step=2, tag="train")

@@ -1,6 +1,6 @@
 """`RerunLogger`: the trainer's logger protocol (`wanderland_nav.rl.loggers.Logger`) writing a rerun
 recording: scalar curves (losses, train stats, eval NE/SR/SPL/IR) and, every `rollout_every`-th
-`log_rollout` call, a few agents' rollouts with their camera frames.
+`log_rollout` call per tag, a few agents' rollouts with their camera frames.
 
 Selected with `logger=rerun` (`conf/logger/rerun.yaml`); training defaults to the console logger.
 One recording per run: `<run_dir>/rerun.rrd` (application id `wanderland_nav`, recording id = the
@@ -30,14 +30,15 @@ class RerunLogger:
     """Logger protocol over a rerun `RecordingStream`.
 
     out_dir: where `rerun.rrd` is written (None: no file; use `spawn=True` for a live viewer).
-    rollout_every: log every n-th `log_rollout` call (1: all of them; 0: never).
+    rollout_every: per tag, log the 1st, (n+1)-th, (2n+1)-th ... `log_rollout` call (0: never). Each eval
+        phase has its own tag (logged); PPO hands over every collected batch as `train` (every n-th logged).
     max_agents: agents of a rollout to show (their frames dominate the recording's size).
     spawn: also stream to a viewer (spawned if none is running; ignored when none can be started).
     scene: with the first rollout that names its scene (`Rollout.meta.scene_root`), log the scene
         (point subsample, collision mesh, navmesh, camera frustums) once, as context for the rollouts.
     """
 
-    def __init__(self, out_dir: str | Path | None, *, rollout_every: int = 1, max_agents: int = 2,
+    def __init__(self, out_dir: str | Path | None, *, rollout_every: int = 5, max_agents: int = 2,
                  spawn: bool = False, application_id: str = "wanderland_nav", recording_id: str | None = None,
                  file_name: str = "rerun.rrd", scene: bool = True):
         self.path = Path(out_dir) / file_name if out_dir is not None else None
@@ -53,7 +54,7 @@ class RerunLogger:
             except Exception as e:  # no viewer binary / no display: keep writing the file
                 print(f"RerunLogger: could not spawn a viewer ({e}); writing {self.path}")
         self.rollout_every, self.max_agents = int(rollout_every), int(max_agents)
-        self._rollout_calls = 0
+        self._rollout_calls: dict[str, int] = {}
         self._scene_pending = bool(scene)
         self._meta = None  # the last Rollout's meta (frames, camera), reused for TensorDict rollouts
         self.rollouts_logged = 0
@@ -80,8 +81,9 @@ class RerunLogger:
         `world/rollouts/<tag>/` in the scene frame once a `Rollout` has told the logger the scene's
         frame (a TensorDict alone: under `rollouts/<tag>/nav`, nav frame); plots under `rollouts/<tag>/plots`.
         """
-        self._rollout_calls += 1
-        if self.rollout_every <= 0 or (self._rollout_calls - 1) % self.rollout_every:
+        n = self._rollout_calls.get(tag, 0)
+        self._rollout_calls[tag] = n + 1
+        if self.rollout_every <= 0 or n % self.rollout_every:
             return
         if not isinstance(rollout, Rollout):
             # a collector batch has no frame information: borrow the last Rollout's (same scene, same camera)
