@@ -174,7 +174,7 @@ def run(cfg: DictConfig) -> dict:
         load_policy_weights(policy, cfg.init_checkpoint)
         policy.pretrained_from = str(cfg.init_checkpoint)
         first = "init"
-    elif getattr(policy, "pretrained_from", None) is None:
+    elif state is None and getattr(policy, "pretrained_from", None) is None:
         log.info("policy %s: randomly initialised (no init_checkpoint)", name)
     if first not in results:
         _evaluate(first, policy, eval_env, cfg, results, results_path, logger, 0)
