@@ -90,16 +90,23 @@ def _one_thread():
     torch.set_num_threads(n)
 
 
+_SMOKE_RUNS: dict[str, Path] = {}   # exp -> run_dir, so later tests reuse a run instead of training again
+
+
+def smoke_cfg(exp: str, scene: Path, run_dir: Path):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose("train", overrides=[f"+exp={exp}", "debug=smoke", f"scene.path={scene}", "scene.demo=false",
+                                           f"run_dir={run_dir}", "render.max_gaussians=2000"])
+
+
 @pytest.mark.parametrize("exp", EXPS)
 def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     from wanderland_nav.rl.checkpoint import load_checkpoint
     from wanderland_nav.train import run
 
-    scene = demo_episodes.parent
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("train", overrides=[f"+exp={exp}", "debug=smoke", f"scene.path={scene}", "scene.demo=false",
-                                          f"run_dir={tmp_path / 'run'}", "render.max_gaussians=2000"])
+    cfg = smoke_cfg(exp, demo_episodes.parent, tmp_path / "run")
     rows = run(cfg)
+    _SMOKE_RUNS[exp] = tmp_path / "run"
     rl = exp.endswith("_rl")
     assert list(rows) == (["untrained", "BC", "BC+RL"] if rl else ["untrained", "BC"])
     for r in rows.values():
@@ -120,16 +127,16 @@ def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
     from wanderland_nav.train import run
 
     scene = demo_episodes.parent
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("train", overrides=["+exp=mbra_bc", "debug=smoke", f"scene.path={scene}", "scene.demo=false",
-                                          f"run_dir={tmp_path / 'run'}", "render.max_gaussians=2000"])
-    run(cfg)
-    ck = tmp_path / "run" / "checkpoints" / "last.pt"
+    run_dir = _SMOKE_RUNS.get("mbra_bc")
+    if run_dir is None:                  # run alone (-k): train the smoke BC run here
+        run_dir = tmp_path / "run"
+        run(smoke_cfg("mbra_bc", scene, run_dir))
+    ck = run_dir / "checkpoints" / "last.pt"
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         ecfg = compose("evaluate", overrides=[f"scene_path={scene}", f"checkpoints=[{ck},{ck}]", "num_episodes=2",
                                               "batch_size=2", f"out={tmp_path}", "progress=false"])
     rows = evaluate(ecfg)
-    assert list(rows) == [f"{tmp_path.name}/run", str(ck)]
+    assert list(rows) == [f"{run_dir.parent.name}/run", str(ck)]
     a, b = rows.values()
     assert a["episodes"] == 2 and a == b      # same weights, same episodes, deterministic policy
     assert (tmp_path / "eval_checkpoints.json").is_file()
