@@ -58,5 +58,6 @@ def test_relative_change_signs():
     lines = table.splitlines()
     assert lines[0].split() == ["policy", "episodes", "NE", "SR", "SPL", "IR"]
     assert "(+50%)" in lines[2] and "(+100%)" in lines[2]
+    assert lines[-1].startswith("(+x%): change vs untrained") and "NE/IR lower is better" in lines[-1]
     with pytest.raises(KeyError, match="nope"):
         comparison_table({"a": {}}, "nope")

@@ -36,4 +36,8 @@ def comparison_table(rows: dict[str, dict[str, float]], baseline: str | None = N
         body.append(cells)
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     fmt = lambda row: "  ".join(x.ljust(w) if i == 0 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))  # noqa: E731
-    return "\n".join([fmt(head), *(fmt(r) for r in body)])
+    lines = [fmt(head), *(fmt(r) for r in body)]
+    if baseline is not None and len(rows) > 1:
+        lower = "/".join(c for c in columns if c in LOWER_IS_BETTER)
+        lines.append(f"(+x%): change vs {baseline}, signed so + is better ({lower} lower is better)")
+    return "\n".join(lines)
