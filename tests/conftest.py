@@ -77,3 +77,12 @@ def demo_episodes(prepared_demo_scene) -> Path:
     write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=8, seed=0,
                          settings=GeneratorSettings(goal_images=False))
     return out
+
+
+@pytest.fixture
+def one_thread():
+    """Tiny models: one intra-op thread is fastest, and on a shared 2-core box far more predictable."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)

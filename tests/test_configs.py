@@ -82,12 +82,7 @@ def test_exp_files_start_with_package_global_and_leave_sizes_alone():
     assert not any("exp" in item for item in train["defaults"] if isinstance(item, dict))
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 _SMOKE_RUNS: dict[str, Path] = {}   # exp -> run_dir, so later tests reuse a run instead of training again
@@ -116,7 +111,7 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
         assert ck["phase"] == "ppo_done" and ck["counters"] == {"ppo_iteration": 2, "ppo_frames": 16}
     else:
         assert ck["phase"] == "bc_done"
-    assert (tmp_path / "run" / "table.txt").read_text().count("\n") == 2 + len(rows)
+    assert (tmp_path / "run" / "table.txt").read_text().count("\n") == 3 + len(rows)  # title, header, rows, legend
     # a second start finds everything done: no retraining, same table
     assert run(cfg) == rows
 

@@ -16,13 +16,7 @@ from wanderland_nav import keys as K
 NAMES = list(POLICY_NAMES)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Tiny models: one intra-op thread is fastest, and on the shared 2-core box far more predictable."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def build(name, **kw):

@@ -12,12 +12,7 @@ from policies.nomad.model import squaredcos_betas
 from wanderland_nav import keys as K
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 # first two waypoints of batch item 0 and the summed value, for seed-0 weights perturbed by seed-123 noise

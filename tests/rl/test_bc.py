@@ -13,12 +13,7 @@ from policies import make_policy
 from wanderland_nav.rl.bc import BCConfig, ExpertActor, ExpertPaths, train_bc
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def l_path():

@@ -12,12 +12,7 @@ from wanderland_nav.rl.checkpoint import Checkpointer
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer, make_actor
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 class ListLogger:
