@@ -45,14 +45,16 @@ def resolve_scene(cfg: DictConfig):
 
     if cfg.scene_path is None and cfg.scene.get("demo", False):
         from planners import NavMesh
-        from wanderland_nav.episodes.generate import write_scene_episodes
+        from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
         from wanderland_nav.pipeline import ensure_demo_scene
 
         scene = ensure_demo_scene(Path(cfg.scene.path), seed=int(cfg.scene.get("seed", 0) or 0))
         episodes = Path(cfg.episodes) if cfg.episodes is not None else Path(scene.root) / "episodes.json"
         if not episodes.is_file():
+            # goal views cost a CPU render each; only policies that read images need them
+            settings = GeneratorSettings(goal_images=bool(cfg.policy.get("needs_images", True)))
             write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), episodes,
-                                 num_episodes=int(cfg.demo_episodes), seed=int(cfg.seed))
+                                 num_episodes=int(cfg.demo_episodes), seed=int(cfg.seed), settings=settings)
             scene = load_scene(scene.root)
         return scene, episodes
     path = Path(cfg.scene_path if cfg.scene_path is not None else cfg.scene.path)
