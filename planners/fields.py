@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from planners.path import _located, _visible_to_nodes
-from planners.visibility import VisPolys, tangent_ok, visible
+from planners.visibility import VisPolys, bucketed_fan_index, tangent_ok, visible
 
 
 def _cross_lin(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -287,14 +287,7 @@ class GeodesicField:
         if key.shape[0] <= self.SMALL_SEARCH:  # few points: one binary search costs fewer calls
             i1 = np.searchsorted(keys, key)
         else:
-            b = ((th + np.pi) * (_N_BINS / (2 * np.pi))).astype(np.int64)
-            np.clip(b, 0, _N_BINS - 1, out=b)
-            i1 = bucket[src * (_N_BINS + 1) + b]  # first key >= the bin's lower edge: <= the answer
-            for _ in range(2):
-                i1 += keys[np.minimum(i1, L - 1)] < key
-            late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
-            if late.shape[0]:
-                i1[late] = np.searchsorted(keys, key[late])
+            i1 = bucketed_fan_index(keys, bucket, _N_BINS, src, th, key)
         np.clip(i1, 1, L - 1, out=i1)
         i0 = i1 - 1
         x0, y0 = hx[i0], hy[i0]

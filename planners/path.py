@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from planners.visibility import tangent_ok, visible
+from planners.visibility import bucketed_fan_index, tangent_ok, visible
 
 
 class PathResult(NamedTuple):
@@ -189,13 +189,7 @@ class _NumpyTables:
             return np.zeros(src.shape[0], bool)
         th = np.arctan2(qy - self.node_xy[src, 1], qx - self.node_xy[src, 0])
         key = th + (src * 32 + 16.0)
-        b = np.clip(((th + np.pi) * (NB / (2 * np.pi))).astype(np.int64), 0, NB - 1)
-        i1 = self.bucket[src * (NB + 1) + b]
-        for _ in range(2):
-            i1 += keys[np.minimum(i1, L - 1)] < key
-        late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
-        if late.shape[0]:
-            i1[late] = np.searchsorted(keys, key[late])
+        i1 = bucketed_fan_index(keys, self.bucket, NB, src, th, key)
         np.clip(i1, 1, L - 1, out=i1)
         x0, y0 = self.hx[i1 - 1], self.hy[i1 - 1]
         ex, ey = self.hx[i1] - x0, self.hy[i1] - y0

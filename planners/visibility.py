@@ -22,6 +22,23 @@ from scipy.sparse import csgraph
 
 from planners.walk import point_in_tri, walk
 
+
+def bucketed_fan_index(keys: np.ndarray, bucket: np.ndarray, n_bins: int, src: np.ndarray, th: np.ndarray,
+                       key: np.ndarray) -> np.ndarray:
+    """Index `[R]` of the first sorted fan key >= `key` (as np.searchsorted(keys, key)), found from a
+    per-source angular bucket table (`bucket[src * (n_bins + 1) + bin]` = first key of that bin) plus two
+    forward steps; the rare points still behind fall back to a binary search. A global binary search
+    over every fan costs ~17 cache misses per point, this ~3."""
+    L = keys.shape[0]
+    b = np.clip(((th + np.pi) * (n_bins / (2 * np.pi))).astype(np.int64), 0, n_bins - 1)
+    i1 = bucket[src * (n_bins + 1) + b]  # first key >= the bin's lower edge: <= the answer
+    for _ in range(2):
+        i1 += keys[np.minimum(i1, L - 1)] < key
+    late = np.flatnonzero((keys[np.minimum(i1, L - 1)] < key) & (i1 < L))
+    if late.shape[0]:
+        i1[late] = np.searchsorted(keys, key[late])
+    return i1
+
 NODE_OFFSET = 1e-4  # m
 
 

@@ -141,6 +141,18 @@ def _stem_key(name: str) -> str:
     return "stem:" + s.rsplit(".", 1)[0]
 
 
+
+def _rigid_field(value, what: str) -> np.ndarray:
+    """A JSON pose field (4x4, or 3x4 without the last row) as a validated rigid 4x4, else SceneFormatError."""
+    T = np.asarray(value, dtype=np.float64)
+    if T.shape == (3, 4):
+        T = np.vstack([T, [0, 0, 0, 1]])
+    try:
+        validate_rigid(T, what=what)
+    except ValueError as e:
+        raise SceneFormatError(str(e)) from None
+    return T
+
 def read_transforms_json(path) -> TransformsJson:
     path = Path(path)
     obj = _load_json(path)
@@ -156,25 +168,13 @@ def read_transforms_json(path) -> TransformsJson:
         if not isinstance(fr, dict) or not isinstance(fr.get("file_path"), str):
             raise SceneFormatError(f"{path}: frames[{i}] needs a string field 'file_path'")
         if "transform_matrix" in fr:
-            T = np.asarray(fr["transform_matrix"], dtype=np.float64)
-            if T.shape == (3, 4):
-                T = np.vstack([T, [0, 0, 0, 1]])
-            try:
-                validate_rigid(T, what=f"{path}: frames[{i}] ('{fr['file_path']}') field transform_matrix")
-            except ValueError as e:
-                raise SceneFormatError(str(e)) from None
+            T = _rigid_field(fr["transform_matrix"], f"{path}: frames[{i}] ('{fr['file_path']}') field transform_matrix")
             fr = {**fr, "transform_matrix": T}
         frames[_norm_name(fr["file_path"])] = fr
         frames.setdefault(_stem_key(fr["file_path"]), fr)
     S = np.eye(4)
     if "applied_transform" in obj:
-        A = np.asarray(obj["applied_transform"], dtype=np.float64)
-        if A.shape == (3, 4):
-            A = np.vstack([A, [0, 0, 0, 1]])
-        try:
-            validate_rigid(A, what=f"{path}: field applied_transform")
-        except ValueError as e:
-            raise SceneFormatError(str(e)) from None
+        A = _rigid_field(obj["applied_transform"], f"{path}: field applied_transform")
         S = np.linalg.inv(A)  # json_world = A @ scene  ->  scene = A^-1 @ json_world
     return TransformsJson(path, model, glob, frames, S)
 
