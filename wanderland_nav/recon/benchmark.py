@@ -43,6 +43,7 @@ class PoseResult:
     gt_centers: np.ndarray  # [M,3] ground-truth centres of the matched cameras
     pred_centers_sim3: np.ndarray  # [M,3] Sim(3)-aligned predicted centres
     pred_centers_se3: np.ndarray  # [M,3] SE(3)-aligned predicted centres
+    up_axis: str | None = None  # ground truth's up axis when known (plots look down it)
 
 
 def evaluate_poses(pred: PoseSet, gt: PoseSet, *, name: str = "", max_time_diff: float = 0.01,
@@ -65,7 +66,7 @@ def evaluate_poses(pred: PoseSet, gt: PoseSet, *, name: str = "", max_time_diff:
            **M.all_pairs(G, P_sim3, chunk_pairs=chunk_pairs, device=device),
            "ape": {"se3": ape_se3, "sim3": ape_sim3},
            "rpe": {"se3": M.rpe(G, P_se3, rpe_delta), "sim3": M.rpe(G, P_sim3, rpe_delta)}}
-    return PoseResult(name or Path(gt.source).name, out, G[:, :3, 3], P_sim3[:, :3, 3], P_se3[:, :3, 3])
+    return PoseResult(name or Path(gt.source).name, out, G[:, :3, 3], P_sim3[:, :3, 3], P_se3[:, :3, 3], gt.up_axis)
 
 
 @dataclass

@@ -35,6 +35,7 @@ class PoseSet:
     names: tuple[str, ...] | None = None  # [N] image names (matched by name)
     stamps: np.ndarray | None = None  # [N] float64 seconds (matched by nearest stamp)
     duplicates_dropped: int = 0  # repeated stamps the reader left out (TUM: first occurrence kept)
+    up_axis: str | None = None  # the world's up axis when the source records one (scene folders)
 
     def __post_init__(self) -> None:
         T = np.asarray(self.world_from_cam, dtype=np.float64).reshape(-1, 4, 4)
@@ -86,7 +87,8 @@ class PoseSet:
         idx = np.asarray(idx, dtype=np.int64)
         names = None if self.names is None else tuple(self.names[i] for i in idx)
         stamps = None if self.stamps is None else np.asarray(self.stamps)[idx]
-        return PoseSet(self.world_from_cam[idx], self.source, self.kind, names, stamps, self.duplicates_dropped)
+        return PoseSet(self.world_from_cam[idx], self.source, self.kind, names, stamps, self.duplicates_dropped,
+                       self.up_axis)
 
 
 def from_cam_from_world(cam_from_world: np.ndarray) -> np.ndarray:

@@ -95,7 +95,8 @@ def read_scene(path) -> PoseSet:
         raise ReconInputError(str(e)) from None
     if not scene.cameras:
         raise ReconInputError(f"{path}: scene has no cameras (no sparse model or transforms.json frames)")
-    return PoseSet(scene.world_from_cams(), str(path), "scene", names=tuple(_norm_name(c.name) for c in scene.cameras))
+    return PoseSet(scene.world_from_cams(), str(path), "scene", names=tuple(_norm_name(c.name) for c in scene.cameras),
+                   up_axis=scene.up_axis)
 
 
 def read_transforms(path) -> PoseSet:

@@ -1,0 +1,111 @@
+"""Score any renderer's images against a scene's held-out views: PSNR, SSIM and (with local weights) LPIPS.
+
+`python -m wanderland_nav.fit` scores its own splats; this scores images written by anything
+(3DGS, gsplat, nerfstudio, a video model) so methods are compared on identical targets:
+
+* views: the scene's `nvs_split/val.txt` cameras ("val", the extrapolated set), or "interp",
+  every `holdout_every`-th train camera (the fit command's interpolation set), or "train";
+* renders: `<renders>/<image name>` for every view, with any of .png/.jpg/.jpeg/.webp when the
+  extension differs; views without a render are counted (`missing`) and listed, never skipped silently;
+  a render whose size differs from the target at `downscale` is an error (no silent resampling).
+
+Conventions (those of the published 3DGS tables, `gaussian-splatting/metrics.py`): images as
+float in [0, 1] (uint8 / 255), a metric per image then the mean over images; PSNR
+`10 log10(1 / MSE)`; SSIM with an 11-tap Gaussian window, sigma 1.5, K1 0.01, K2 0.03. Two
+differences, measured in experiments/recon/README.md: our SSIM averages the valid window
+centres (scikit-image's convention, which `gsfit.metrics.ssim` matches to 1e-5) where 3DGS
+zero-pads the border; and pixels outside the scene's `images_mask/` are left out (3DGS has no
+masks). LPIPS is the AlexNet variant from local weights (`gsfit.lpips`); 3DGS reports VGG-LPIPS,
+so the two are not comparable; without weights the LPIPS column is absent and the result says so.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from wanderland_nav.gsfit.metrics import psnr, ssim
+from wanderland_nav.gsfit.views import load_view, split_cameras
+from wanderland_nav.recon.poses import ReconInputError
+
+RENDER_EXTS = (".png", ".jpg", ".jpeg", ".webp")
+SPLITS = ("val", "interp", "train")
+NO_LPIPS = "LPIPS not computed: set lpips.backbone_path and lpips.lin_path to local AlexNet / LPIPS v0.1 weights"
+
+
+def find_render(renders: Path, image_name: str) -> Path | None:
+    """`<renders>/<name>`, else the same relative path with another image extension."""
+    exact = renders / image_name
+    if exact.is_file():
+        return exact
+    stem = exact.with_suffix("")
+    return next((stem.with_suffix(e) for e in RENDER_EXTS if stem.with_suffix(e).is_file()), None)
+
+
+def _read_render(path: Path, size: tuple[int, int], target: str) -> torch.Tensor:
+    """`[H, W, 3]` float32 in [0, 1]; error naming both files if the size is not the target's."""
+    try:
+        with Image.open(path) as im:
+            if im.size != size:
+                raise ReconInputError(f"{path}: render is {im.size[0]}x{im.size[1]} but the target {target} is "
+                                      f"{size[0]}x{size[1]} at this downscale (set nvs_downscale to match)")
+            a = np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except OSError as e:
+        raise ReconInputError(f"{path}: cannot read render: {e}") from None
+    return torch.from_numpy(a.astype(np.float32) / 255.0)
+
+
+def nvs_cameras(scene, split: str, holdout_every: int = 8) -> list:
+    """The scene's cameras of `split` ("val" | "interp" | "train"), in the fit command's order."""
+    if split not in SPLITS:
+        raise ValueError(f"nvs split must be one of {SPLITS}, got {split!r}")
+    if split == "val":
+        return [c for c in scene.cameras if c.split == "val"]
+    return split_cameras(scene.cameras, holdout_every)[split]
+
+
+@torch.no_grad()
+def score_renders(scene, renders, *, split: str = "val", holdout_every: int = 8, downscale: float = 1.0,
+                  lpips=None) -> dict:
+    """{"psnr", "ssim", ["lpips"], "n", "missing": [names], "per_view": {name: {...}}, "notes": [...]}."""
+    renders = Path(renders)
+    if not renders.is_dir():
+        raise ReconInputError(f"nvs={renders}: no such folder of rendered images")
+    cams = nvs_cameras(scene, split, holdout_every)
+    if not cams:
+        raise ReconInputError(f"{scene.root}: no cameras in split {split!r} (nvs_split/{split}.txt or images_val)")
+    per, missing = {}, []
+    for cam in cams:  # one image pair at a time: images differ in size and are read from disk anyway
+        path = find_render(renders, cam.name)
+        if path is None:
+            missing.append(cam.name)
+            continue
+        view = load_view(cam, downscale=downscale)
+        pred = _read_render(path, (view.width, view.height), str(cam.image_path))[None]
+        gt, mask = view.image[None], view.mask[None]
+        r = {"psnr": float(psnr(pred, gt, mask)[0]), "ssim": float(ssim(pred, gt, mask)[0])}
+        if lpips is not None:
+            r["lpips"] = float(lpips(torch.where(mask, pred, gt), gt)[0])  # masked-out pixels: no difference
+        per[cam.name] = r
+    keys = ("psnr", "ssim") + (("lpips",) if lpips is not None else ())
+    out = {k: (sum(r[k] for r in per.values()) / len(per)) if per else math.nan for k in keys}
+    notes = [] if lpips is not None else [NO_LPIPS]
+    if missing:
+        notes.append(f"{len(missing)} of {len(cams)} {split} views have no render in {renders} (first: {missing[0]!r})")
+    return {**out, "split": split, "n": len(per), "n_views": len(cams), "missing": missing, "per_view": per,
+            "notes": notes}
+
+
+def format_nvs(res: dict, label: str = "") -> str:
+    """Markdown row block: PSNR / SSIM (/ LPIPS) with the view count and notes."""
+    cols = [("psnr", "PSNR", "{:.2f}"), ("ssim", "SSIM", "{:.4f}")] + ([("lpips", "LPIPS (alex)", "{:.4f}")]
+                                                                      if "lpips" in res else [])
+    lines = ["| renders | split | views | " + " | ".join(h for _, h, _ in cols) + " |",
+             "|---|---|---|" + "---|" * len(cols),
+             f"| {label} | {res['split']} | {res['n']}/{res['n_views']} | "
+             + " | ".join(f.format(res[k]) for k, _, f in cols) + " |"]
+    return "\n".join(lines + [""] + [f"note: {n}" for n in res["notes"]])
