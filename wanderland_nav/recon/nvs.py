@@ -5,7 +5,7 @@
 
 * views: the scene's `nvs_split/val.txt` cameras ("val", the extrapolated set), or "interp",
   every `holdout_every`-th train camera (the fit command's interpolation set), or "train";
-* renders: `<renders>/<image name>` for every view, with any of .png/.jpg/.jpeg/.webp when the
+* renders: `<renders>/<image name>` for every view, with any of .png/.jpg/.jpeg/.webp/.bmp/.tif(f) when the
   extension differs; views without a render are counted (`missing`) and listed, never skipped silently;
   a render whose size differs from the target at `downscale` is an error (no silent resampling).
 
@@ -32,7 +32,7 @@ from wanderland_nav.gsfit.metrics import psnr, ssim
 from wanderland_nav.gsfit.views import load_view, split_cameras
 from wanderland_nav.recon.poses import ReconInputError
 
-RENDER_EXTS = (".png", ".jpg", ".jpeg", ".webp")
+RENDER_EXTS = (".png", ".jpg", ".jpeg", ".webp", ".bmp", ".tif", ".tiff")
 SPLITS = ("val", "interp", "train")
 NO_LPIPS = "LPIPS not computed: set lpips.backbone_path and lpips.lin_path to local AlexNet / LPIPS v0.1 weights"
 

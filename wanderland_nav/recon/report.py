@@ -1,7 +1,8 @@
 """Write the benchmark's results: `recon_eval.json` (everything) and `recon_eval.csv` (one row per scene).
 
-Both written atomically (`wanderland_nav.atomic`). JSON has no NaN: undefined numbers (a metric
-with no pairs, a failed scene) are written as null, so they can never be read back as zero.
+Both written atomically (`wanderland_nav.atomic`). JSON has no NaN or infinity: non-finite
+numbers are written as null (NaN: undefined, e.g. a metric with no pairs; +inf: the PSNR of a
+render identical to its target), never as a number that could be read back as a result.
 """
 
 from __future__ import annotations
