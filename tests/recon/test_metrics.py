@@ -111,7 +111,7 @@ def _brute_force_pairs(gt, pred):
             "auc30_1deg": np.mean([np.mean(e < k) for k in range(1, 31)])}
 
 
-@pytest.mark.parametrize("chunk_pairs", [1, 37, 1 << 19])
+@pytest.mark.parametrize("chunk_pairs", [1, 37, 1 << 20])
 def test_chunked_pairs_match_brute_force(chunk_pairs):
     gt = _random_trajectory(31, seed=3)
     rng = np.random.default_rng(4)

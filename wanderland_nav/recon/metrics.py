@@ -78,7 +78,7 @@ def ate(gt: np.ndarray, pred_aligned: np.ndarray) -> tuple[float, float]:
 
 
 @torch.no_grad()
-def all_pairs(gt: np.ndarray, pred: np.ndarray, *, chunk_pairs: int = 1 << 19, device: str = "cpu") -> dict:
+def all_pairs(gt: np.ndarray, pred: np.ndarray, *, chunk_pairs: int = 1 << 20, device: str = "cpu") -> dict:
     """T-RTE (m, deg), R-RTE (deg), AUC@30 over all i < j pairs, chunked (see module docstring)."""
     g = torch.as_tensor(np.asarray(gt, np.float64), device=device)
     p = torch.as_tensor(np.asarray(pred, np.float64), device=device)
@@ -90,28 +90,31 @@ def all_pairs(gt: np.ndarray, pred: np.ndarray, *, chunk_pairs: int = 1 << 19, d
     acc = dict.fromkeys(("rrte", "trte_deg", "trte_m", "auc", "auc1"), 0.0)
     pairs = no_dir = 0
     rows = max(1, chunk_pairs // max(1, n))
+    zero = torch.zeros((), dtype=g.dtype, device=device)
     for i0 in range(0, n - 1, rows):  # blocks of rows; every block is batched over all its pairs
         i1 = min(n - 1, i0 + rows)
-        i = torch.arange(i0, i1, device=device)
-        j = torch.arange(i0 + 1, n, device=device)
-        upper = j[None, :] > i[:, None]  # [b, n'] pairs i < j only
+        upper = torch.arange(i0 + 1, n, device=device)[None, :] > torch.arange(i0, i1, device=device)[:, None]
         cos_r = ((Mf[i0:i1] @ Mf[i0 + 1:].T - 1.0) / 2.0).clamp(-1.0, 1.0)
-        r_err = torch.rad2deg(torch.arccos(cos_r))  # [b, n'] relative-rotation error
+        r_err = torch.rad2deg(torch.arccos(cos_r))  # [b, n'] relative-rotation error, pairs (i, j > i0)
         dg = cg[None, i0 + 1:] - cg[i0:i1, None]  # [b, n', 3] world-frame c_j - c_i
         dp = cp[None, i0 + 1:] - cp[i0:i1, None]
         ng, np_ = dg.norm(dim=-1), dp.norm(dim=-1)
-        # angle between Rg_i^T dg and Rp_i^T dp (camera-i frames) = angle between dg and M_i dp
-        dp_rot = torch.einsum("bkl,bnl->bnk", M[i0:i1], dp)
-        t_err = torch.rad2deg(torch.atan2(torch.linalg.cross(dg, dp_rot).norm(dim=-1), (dg * dp_rot).sum(-1)))
+        # angle between Rg_i^T dg and Rp_i^T dp (camera-i frames) = angle between dg and M_i dp; Kahan's
+        # 2 atan2(|u - v|, |u + v|) of the unit vectors is exact at 0 and 180 deg, unlike acos of a dot
+        u = dg / ng.clamp_min(_NO_DIRECTION_M)[..., None]
+        v = torch.bmm(dp, M[i0:i1].transpose(1, 2)) / np_.clamp_min(_NO_DIRECTION_M)[..., None]
+        t_err = torch.rad2deg(2.0 * torch.atan2((u - v).norm(dim=-1), (u + v).norm(dim=-1)))
         has_dir = upper & (ng > _NO_DIRECTION_M) & (np_ > _NO_DIRECTION_M)
-        e = torch.maximum(r_err, t_err)[has_dir]
-        acc["rrte"] += float((r_err[upper] ** 2).sum())
-        acc["trte_m"] += float(((np_ - ng)[upper] ** 2).sum())
-        acc["trte_deg"] += float((t_err[has_dir] ** 2).sum())
-        acc["auc"] += float((1.0 - e / AUC_MAX_DEG).clamp_min(0.0).sum())
-        acc["auc1"] += float((AUC_MAX_DEG - torch.floor(e)).clamp(0.0, AUC_MAX_DEG).sum() / AUC_MAX_DEG)
-        pairs += int(upper.sum())
-        no_dir += int(upper.sum() - has_dir.sum())
+        e = torch.maximum(r_err, t_err)
+        acc["rrte"] += float(torch.where(upper, r_err * r_err, zero).sum())
+        acc["trte_m"] += float(torch.where(upper, (np_ - ng) ** 2, zero).sum())
+        acc["trte_deg"] += float(torch.where(has_dir, t_err * t_err, zero).sum())
+        acc["auc"] += float(torch.where(has_dir, (1.0 - e / AUC_MAX_DEG).clamp_min(0.0), zero).sum())
+        acc["auc1"] += float(torch.where(has_dir, (AUC_MAX_DEG - torch.floor(e)).clamp(0.0, AUC_MAX_DEG), zero).sum()
+                             / AUC_MAX_DEG)
+        n_up, n_dir = int(upper.sum()), int(has_dir.sum())
+        pairs += n_up
+        no_dir += n_up - n_dir
     with_dir = pairs - no_dir
 
     def rms(total: float, count: int) -> float:
