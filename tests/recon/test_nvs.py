@@ -52,7 +52,8 @@ def test_perfect_noisy_and_missing_renders(scene, tmp_path):
     want = _masked_psnr(tmp_path / val[3].name, val[3])
     assert per[val[3].name]["psnr"] == pytest.approx(want, abs=1e-3) and per[val[3].name]["ssim"] < 0.99
     assert "lpips" not in res and res["notes"][0] == NO_LPIPS and "2 of 24 val views" in res["notes"][1]
-    assert "PSNR" in format_nvs(res, "noisy") and "LPIPS" not in format_nvs(res, "noisy").split("note")[0]
+    assert per[val[3].name]["ssim"] > per[val[3].name]["ssim_skimage"]  # zero padding lifts the border windows
+    assert "SSIM (3DGS)" in format_nvs(res, "noisy") and "LPIPS" not in format_nvs(res, "noisy").split("note")[0]
 
 
 def test_size_mismatch_lpips_and_interp_split(scene, tmp_path):
@@ -74,3 +75,29 @@ def test_size_mismatch_lpips_and_interp_split(scene, tmp_path):
     assert res["lpips"] > 0 and not any("LPIPS" in n for n in res["notes"])
     with pytest.raises(ValueError, match="nvs split must be one of"):
         nvs_cameras(scene, "extrap")
+
+
+def test_zero_padded_ssim_is_the_3dgs_window_and_padding():
+    """Against a plain 2D-window implementation of 3DGS's SSIM (11x11 Gaussian, sigma 1.5, zero padding 5)."""
+    from torch.nn import functional as F
+
+    from wanderland_nav.gsfit.metrics import gaussian_window_1d
+    from wanderland_nav.recon.nvs import ssim_zero_padded
+
+    g = torch.Generator().manual_seed(0)
+    a = torch.rand(2, 30, 40, 3, generator=g, dtype=torch.float64)
+    b = (a + 0.1 * torch.randn(2, 30, 40, 3, generator=g, dtype=torch.float64)).clamp(0, 1)
+    w = gaussian_window_1d(dtype=torch.float64)
+    win = (w[:, None] * w[None, :]).expand(3, 1, 11, 11)
+    ref = []
+    for x, y in zip(a, b):  # two images: the reference may loop
+        x, y = x.permute(2, 0, 1)[None], y.permute(2, 0, 1)[None]
+        f = lambda t: F.conv2d(t, win, padding=5, groups=3)  # noqa: E731
+        mx, my = f(x), f(y)
+        vx, vy, cxy = f(x * x) - mx ** 2, f(y * y) - my ** 2, f(x * y) - mx * my
+        ref.append(((2 * mx * my + 1e-4) * (2 * cxy + 9e-4) / ((mx ** 2 + my ** 2 + 1e-4) * (vx + vy + 9e-4))).mean())
+    torch.testing.assert_close(ssim_zero_padded(a, b), torch.stack(ref), rtol=0, atol=1e-12)
+    assert torch.allclose(ssim_zero_padded(a, a), torch.ones(2, dtype=torch.float64))
+    mask = torch.zeros(2, 30, 40, 1, dtype=torch.bool)
+    mask[:, :, :20] = True  # left half only: differs from the full mean
+    assert not torch.allclose(ssim_zero_padded(a, b, mask), ssim_zero_padded(a, b))

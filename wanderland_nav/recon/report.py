@@ -9,21 +9,10 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from pathlib import Path
 
-from wanderland_nav.atomic import atomic_write_json, atomic_write_text
+from wanderland_nav.atomic import atomic_write_json, atomic_write_text, finite_or_none
 from wanderland_nav.recon.benchmark import Benchmark
-
-
-def _finite_or_none(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite_or_none(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite_or_none(v) for v in obj]
-    return obj
 
 
 def scalar_columns(metrics: dict) -> dict:
@@ -56,5 +45,5 @@ def write_results(out_dir, bench: Benchmark | None, *, nvs: dict | None = None, 
         written.append(out_dir / "recon_eval.csv")
     if nvs is not None:
         doc["nvs"] = nvs
-    atomic_write_json(out_dir / "recon_eval.json", _finite_or_none(doc))
+    atomic_write_json(out_dir / "recon_eval.json", finite_or_none(doc))
     return [out_dir / "recon_eval.json"] + written

@@ -53,9 +53,8 @@ def plot_trajectories(out_path, gt: np.ndarray, pred: np.ndarray, *, up: np.ndar
         ax.set_ylabel("m")
         ax.set_title(title or "trajectory (top-down)")
         ax.legend(loc="best", fontsize=8)
-        out_path = Path(out_path)
-        with atomic_path(out_path) as tmp:
+        with atomic_path(out_path) as tmp:  # no "Software" stamp: same input, same bytes
             fig.savefig(tmp, dpi=dpi, format="png", metadata={"Software": None})
     finally:
         plt.close(fig)
-    return out_path
+    return Path(out_path)
