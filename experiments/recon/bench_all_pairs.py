@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as recon_eval sets it: no spinning threads on a shared CPU
 
 def _child(n: int, chunk: int, threads: int) -> dict:
     import numpy as np

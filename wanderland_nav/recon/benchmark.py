@@ -48,7 +48,7 @@ class PoseResult:
 
 def evaluate_poses(pred: PoseSet, gt: PoseSet, *, name: str = "", max_time_diff: float = 0.01,
                    time_offset: float = 0.0, rpe_delta: int = 1, collinear_tol: float = 1e-9,
-                   chunk_pairs: int = 1 << 20, device: str = "cpu") -> PoseResult:
+                   chunk_pairs: int = 1 << 16, device: str = "cpu") -> PoseResult:
     """Every pose metric of `pred` against `gt` (see module docstring); ReconInputError on degenerate input."""
     m = match(pred, gt, max_diff=max_time_diff, offset=time_offset)
     what = f"{pred.source} vs {gt.source}"

@@ -78,7 +78,7 @@ def ate(gt: np.ndarray, pred_aligned: np.ndarray) -> tuple[float, float]:
 
 
 @torch.no_grad()
-def all_pairs(gt: np.ndarray, pred: np.ndarray, *, chunk_pairs: int = 1 << 20, device: str = "cpu") -> dict:
+def all_pairs(gt: np.ndarray, pred: np.ndarray, *, chunk_pairs: int = 1 << 16, device: str = "cpu") -> dict:
     """T-RTE (m, deg), R-RTE (deg), AUC@30 over all i < j pairs, chunked (see module docstring)."""
     g = torch.as_tensor(np.asarray(gt, np.float64), device=device)
     p = torch.as_tensor(np.asarray(pred, np.float64), device=device)
