@@ -116,6 +116,10 @@ def test_name_matching_falls_back_to_stems_and_counts_unmatched():
     m = match_names(["a.png", "b.png", "zz.png"], ["a.jpg", "b.jpg", "c.jpg", "d.jpg"])
     assert m.by == "stem" and m.pred_idx.tolist() == [0, 1] and m.gt_idx.tolist() == [0, 1]
     assert m.summary()["unmatched_gt"] == 2 and m.summary()["unmatched_pred"] == 1
+    flat = match_names(["0001.png", "0002.png"], ["seq/0001.jpg", "seq/0002.jpg", "seq/0003.jpg"])
+    assert flat.by == "basename" and flat.gt_idx.tolist() == [0, 1]
+    rig = match_names(["0001.png"], ["left/0001.jpg", "right/0001.jpg"])  # ambiguous stems: no guess
+    assert len(rig) == 0 and rig.completeness == 0.0
 
 
 def test_degenerate_and_malformed_inputs(tmp_path):

@@ -141,3 +141,15 @@ def test_umeyama_degenerate_inputs_are_refused():
         umeyama(np.ones((5, 3)), line[:5], with_scale=True)
     with pytest.raises(ReconInputError, match="counts must match"):
         umeyama(line, line[:5], with_scale=False)
+
+
+@pytest.mark.gpu
+def test_all_pairs_on_cuda_matches_cpu():
+    import torch
+
+    if not torch.cuda.is_available():
+        pytest.skip("needs CUDA")
+    gt, pred = _random_trajectory(300, seed=6), _random_trajectory(300, seed=7)
+    cpu, gpu = all_pairs(gt, pred, chunk_pairs=4096), all_pairs(gt, pred, chunk_pairs=4096, device="cuda")
+    for k, v in cpu.items():
+        assert gpu[k] == pytest.approx(v, rel=1e-9), k

@@ -26,7 +26,7 @@ class Matches:
     gt_idx: np.ndarray  # [M] int64 indices into the ground truth, ascending
     n_pred: int
     n_gt: int
-    by: str  # "name" | "stem" | "timestamp"
+    by: str  # "name" | "stem" | "basename" | "timestamp"
     shared: int = 0  # extra uses of a longer-trajectory stamp already matched (timestamps only)
 
     def __len__(self) -> int:
@@ -55,18 +55,28 @@ def match(pred: PoseSet, gt: PoseSet, *, max_diff: float = 0.01, offset: float =
                           "a TUM trajectory can only be compared with another TUM trajectory")
 
 
+_NAME_KEYS = (  # tried in order; the first that matches anything wins
+    ("name", str),
+    ("stem", lambda n: str(PurePosixPath(n).with_suffix(""))),  # 'left/0001.png' ~ 'left/0001.jpg'
+    ("basename", lambda n: PurePosixPath(n).stem),  # 'left/0001.jpg' ~ '0001.png' (flat output folders)
+)
+
+
 def match_names(pred_names, gt_names) -> Matches:
-    """Exact (normalised) image names; when none agree, names without their extension (`0001.png` ~ `0001.jpg`)."""
-    for by, key in (("name", str), ("stem", lambda n: str(PurePosixPath(n).with_suffix("")))):
+    """Exact (normalised) image names; when none agree, names without extension, then bare file stems.
+    A looser key is used only when it is unique among the ground-truth names (else it could pair wrongly)."""
+    pairs: list[tuple[int, int]] = []
+    by = "name"
+    for by, key in _NAME_KEYS:
         gt_index: dict[str, int] = {}
         for i, n in enumerate(gt_names):
             gt_index.setdefault(key(n), i)
-        if by == "stem" and len(gt_index) < len(gt_names):
-            break  # stems are ambiguous in the ground truth: stay with (zero) exact matches
+        if by != "name" and len(gt_index) < len(gt_names):
+            continue  # ambiguous in the ground truth (e.g. left/0001 and right/0001)
         pairs = [(i, gt_index[key(n)]) for i, n in enumerate(pred_names) if key(n) in gt_index]
-        if pairs or by == "stem":
+        if pairs:
             break
-    pairs = sorted(pairs, key=lambda ij: ij[1])
+    pairs.sort(key=lambda ij: ij[1])
     p = np.array([i for i, _ in pairs], dtype=np.int64)
     g = np.array([j for _, j in pairs], dtype=np.int64)
     return Matches(p, g, len(pred_names), len(gt_names), by)
