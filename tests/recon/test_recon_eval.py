@@ -41,6 +41,7 @@ def test_folder_of_scenes_gives_mean_median_and_sr(shared_data, tmp_path, capsys
     d = shared_data / "trajectories"
     gt, pred = tmp_path / "gt", tmp_path / "pred"
     gt.mkdir(), pred.mkdir()
+    (gt / "README.md").write_text("not a scene\n")  # ignored: only folders and .txt/.json/.tum files are scenes
     for scene, (est, ref) in {"a": ("freiburg1_xyz-rgbdslam.txt", "freiburg1_xyz-groundtruth.txt"),
                               "b": ("fr2_desk_ORB_kf_mono.txt", "fr2_desk_groundtruth.txt"),
                               "c": (None, "fr2_desk_groundtruth.txt")}.items():

@@ -27,6 +27,7 @@ from wanderland_nav.recon.poses import PoseSet, ReconInputError
 from wanderland_nav.recon.readers import detect_kind, read_poses
 
 SR_AUC_THRESHOLD = 0.1
+PREDICTION_SUFFIXES = (".txt", ".json", ".tum")  # files that can be one scene's input in a folder of scenes
 TABLE_COLUMNS = (  # (key, header, format): the paper's Table 2 columns
     ("t_ate_se3", "T-ATE^R (m)", "{:.4f}"), ("t_ate_sim3", "T-ATE^S (m)", "{:.4f}"), ("r_ate_deg", "R-ATE (deg)", "{:.3f}"),
     ("t_rte_m", "T-RTE (m)", "{:.4f}"), ("t_rte_deg", "T-RTE (deg)", "{:.3f}"), ("r_rte_deg", "R-RTE (deg)", "{:.3f}"),
@@ -125,20 +126,22 @@ def is_scene_collection(path) -> bool:
 
 def find_prediction(pred_root: Path, scene: str) -> Path | None:
     """`<pred_root>/<scene>` (folder or file), else `<pred_root>/<scene>.{txt,json,tum}`."""
-    for cand in (pred_root / scene, *(pred_root / f"{scene}{ext}" for ext in (".txt", ".json", ".tum"))):
+    for cand in (pred_root / scene, *(pred_root / f"{scene}{ext}" for ext in PREDICTION_SUFFIXES)):
         if cand.exists():
             return cand
     return None
 
 
 def evaluate_paths(pred, gt, **kwargs) -> Benchmark:
-    """One input against one input, or (both folders of scenes) every ground-truth scene in turn."""
+    """One input against one input, or (both folders of scenes) every ground-truth scene in turn: each
+    sub-folder of `gt`, and each `.txt`/`.json`/`.tum` file in it (other files, e.g. a README, are not scenes)."""
     pred, gt = Path(pred), Path(gt)
     if not is_scene_collection(gt):
         return Benchmark([evaluate_poses(read_poses(pred), read_poses(gt), **kwargs)])
     if not pred.is_dir():
         raise ReconInputError(f"gt={gt} is a folder of scenes, so pred must be a folder of predictions, got {pred}")
-    scenes = sorted(d.name for d in gt.iterdir() if not d.name.startswith("."))
+    scenes = sorted(d.name for d in gt.iterdir() if not d.name.startswith(".")
+                    and (d.is_dir() or d.suffix in PREDICTION_SUFFIXES))
     if not scenes:
         raise ReconInputError(f"gt={gt}: empty folder")
     results, failed = [], {}
