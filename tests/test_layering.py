@@ -21,6 +21,8 @@ FORBIDDEN = {
                               "trimesh", "torchrl", "rerun", "hydra"],
     "planners": ["wanderland_nav.envs", "wanderland_nav.viz", "wanderland_nav.render", "policies", "torchrl", "rerun", "hydra"],
     "wanderland_nav/envs": ["wanderland_nav.viz", "policies", "rerun", "hydra"],
+    "wanderland_nav/recon": ["wanderland_nav.envs", "wanderland_nav.viz", "policies", "planners", "torchrl", "rerun",
+                             "hydra", "matplotlib"],
     "policies": ["wanderland_nav.scene", "wanderland_nav.render", "wanderland_nav.envs", "wanderland_nav.viz",
                  "planners", "rerun", "hydra", "torchvision"],
 }
@@ -61,7 +63,7 @@ def test_rerun_is_imported_only_in_viz():
 
 
 def test_hydra_only_in_entry_points():
-    entry = {"prepare", "expert", "train", "evaluate", "replay", "fit"}
+    entry = {"prepare", "expert", "train", "evaluate", "replay", "fit", "recon_eval"}
     for top in ("wanderland_nav", "planners", "policies"):
         for f in (REPO / top).rglob("*.py"):
             rel = f.relative_to(REPO)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -52,3 +53,13 @@ def atomic_write_text(target: str | os.PathLike, text: str) -> None:
 def atomic_write_json(target: str | os.PathLike, obj, *, indent: int | None = 2) -> None:
     """Deterministic JSON (sorted keys are NOT forced: field order is part of the schema)."""
     atomic_write_text(target, json.dumps(obj, indent=indent, allow_nan=False) + "\n")
+
+
+def finite_or_none(obj):
+    """`obj` with every non-finite float (NaN, inf) replaced by None, recursively through dicts and
+    lists: JSON has no NaN, and an undefined number must never be read back as a value."""
+    if isinstance(obj, dict):
+        return {k: finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_none(v) for v in obj]
+    return None if isinstance(obj, float) and not math.isfinite(obj) else obj

@@ -1,0 +1,99 @@
+"""`python -m wanderland_nav.recon_eval`: the paper's reconstruction benchmark on any tool's output.
+
+Thin Hydra entry point: compose conf/recon_eval.yaml, call `wanderland_nav.recon`, print the
+table, write `recon_eval.{json,csv}`, a top-down PNG per scene and `recon_eval.rrd` to `out`.
+
+Examples:
+    python -m wanderland_nav.recon_eval pred=est.txt gt=groundtruth.txt            # TUM, stamps within 10 ms
+    python -m wanderland_nav.recon_eval pred=vggt/sparse/0 gt=/data/wanderland/scene_01
+    python -m wanderland_nav.recon_eval pred=preds/ gt=/data/wanderland/            # every scene: mean/median, SR
+    python -m wanderland_nav.recon_eval nvs=renders/ gt=/data/wanderland/scene_01   # PSNR/SSIM(/LPIPS) on nvs_split
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as in fit.py: no spinning OpenMP threads on shared CPUs
+
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+
+def run(cfg: dict) -> dict:
+    """Everything `main` does, on a plain dict (tests call it without Hydra). Returns what was written."""
+    from wanderland_nav.recon import evaluate_paths
+    from wanderland_nav.recon.report import write_results
+
+    if cfg.get("gt") is None or (cfg.get("pred") is None and cfg.get("nvs") is None):
+        raise ValueError("recon_eval needs gt=<path> and pred=<path> (poses) and/or nvs=<renders folder> (images)")
+    out = Path(cfg["out"]) if cfg.get("out") else _hydra_output_dir()
+    bench = nvs = None
+    if cfg.get("pred") is not None:
+        bench = evaluate_paths(cfg["pred"], cfg["gt"], max_time_diff=float(cfg["max_time_diff"]),
+                               time_offset=float(cfg["time_offset"]), rpe_delta=int(cfg["rpe_delta"]),
+                               collinear_tol=float(cfg["collinear_tol"]), chunk_pairs=int(cfg["chunk_pairs"]),
+                               device=str(cfg["device"]))
+        print(bench.table(label=cfg.get("name") or Path(cfg["pred"]).name), flush=True)
+    if cfg.get("nvs") is not None:
+        nvs = _score_nvs(cfg)
+    written = write_results(out, bench, nvs=nvs, meta={k: cfg.get(k) for k in ("pred", "gt", "nvs", "name")})
+    if bench is not None and bench.results:
+        written += _draw(out, bench, plot=bool(cfg.get("plot", True)), rerun=bool(cfg.get("rerun", True)))
+    print("wrote " + ", ".join(str(p) for p in written))
+    return {"bench": bench, "nvs": nvs, "written": written}
+
+
+def _score_nvs(cfg: dict) -> dict:
+    from wanderland_nav.recon.nvs import format_nvs, score_renders
+    from wanderland_nav.scene import load_scene
+
+    lpips = None
+    lp = cfg.get("lpips") or {}
+    if lp.get("backbone_path") and lp.get("lin_path"):
+        from wanderland_nav.gsfit.lpips import LPIPS
+
+        lpips = LPIPS.from_files(lp["backbone_path"], lp["lin_path"])
+    res = score_renders(load_scene(cfg["gt"]), cfg["nvs"], split=str(cfg["nvs_split"]),
+                        holdout_every=int(cfg["nvs_holdout_every"]), downscale=float(cfg["nvs_downscale"]), lpips=lpips)
+    print(format_nvs(res, label=cfg.get("name") or Path(cfg["nvs"]).name), flush=True)
+    return res
+
+
+def _draw(out: Path, bench, *, plot: bool, rerun: bool) -> list[Path]:
+    written = []
+    if plot:
+        from wanderland_nav.geometry import up_vector
+        from wanderland_nav.viz.recon_plot import plot_trajectories
+
+        for r in bench.results:
+            up = up_vector(r.up_axis) if r.up_axis else None
+            title = f"{r.name}: T-ATE^S {r.metrics['t_ate_sim3']:.3f} m, {r.metrics['matched']} cameras"
+            written.append(plot_trajectories(out / f"traj_{Path(r.name).stem}.png", r.gt_centers,
+                                             r.pred_centers_sim3, up=up, title=title))
+    if rerun:
+        from wanderland_nav.viz.rerun_recon import write_recon_recording
+
+        write_recon_recording(out / "recon_eval.rrd", bench.results)
+        written.append(out / "recon_eval.rrd")
+    return written
+
+
+def _hydra_output_dir() -> Path:
+    from hydra.core.hydra_config import HydraConfig
+
+    try:
+        return Path(HydraConfig.get().runtime.output_dir)
+    except ValueError:  # composed without Hydra's runtime (tests): current folder
+        return Path.cwd()
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="recon_eval")
+def main(cfg: DictConfig) -> None:
+    run(OmegaConf.to_container(cfg, resolve=True))
+
+
+if __name__ == "__main__":
+    main()
