@@ -149,7 +149,7 @@ def test_random_dinov2_is_logged(caplog):
 def test_citywalker_with_vit_encoder_runs():
     torch.manual_seed(0)
     p = make_policy("citywalker", encoder="dinov2", image_size=(28, 28), dim=32, depth=1, heads=2,
-                    vit=dict(embed_dim=32, depth=1, num_heads=2), freeze_encoder=True)
+                    vit=dict(embed_dim=32, depth=1, num_heads=2), freeze_encoder="always")
     td = p(make_obs((2,)))
     assert td[K.WAYPOINTS].shape == (2, 5, 2)
     assert not any(q.requires_grad for q in p.encoder.parameters())

@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from wanderland_nav.cache import json_digest
 from wanderland_nav.episodes.goal_images import render_goal_images
 from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
 from wanderland_nav.episodes.paths import first_heading_nav, last_heading_nav, polyline_length, resample_polyline
@@ -261,7 +262,7 @@ def args_hash(scene_name: str, num_episodes: int, seed: int, settings: Generator
               instruction_source: str, navmesh_hash: str) -> str:
     payload = {"format": FORMAT_VERSION, "scene": scene_name, "num_episodes": int(num_episodes), "seed": int(seed),
                "settings": settings.to_dict(), "instructions": instruction_source, "navmesh": navmesh_hash}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+    return json_digest(payload)
 
 
 def _up_to_date(out: Path, digest: str) -> list[Episode] | None:
