@@ -109,13 +109,6 @@ def rotmat_to_quat(R: torch.Tensor) -> torch.Tensor:
     return q.reshape(*R.shape[:-2], 4)
 
 
-def yaw_to_quat(yaw: torch.Tensor) -> torch.Tensor:
-    """Heading about +z (nav frame) `[...]` -> wxyz quaternion `[..., 4]`."""
-    half = 0.5 * yaw
-    zero = torch.zeros_like(yaw)
-    return torch.stack([torch.cos(half), zero, zero, torch.sin(half)], -1)
-
-
 # --------------------------------------------------------------------------- rigid transforms
 
 
@@ -155,9 +148,9 @@ def validate_rigid(T, *, what: str, tol: float = 1e-3) -> None:
         )
 
 
-def wrap_angle(a: torch.Tensor) -> torch.Tensor:
-    """Wrap angles to [-pi, pi)."""
-    return torch.remainder(a + math.pi, 2 * math.pi) - math.pi
+def wrap_angle(a):
+    """Wrap angles (radians) to [-pi, pi): a float, a numpy array or a torch tensor, same type back."""
+    return (a + math.pi) % (2 * math.pi) - math.pi  # floor modulo (torch: remainder), so the result is >= -pi
 
 
 def world_to_body_2d(points_xy: torch.Tensor, agent_xy: torch.Tensor, agent_yaw: torch.Tensor) -> torch.Tensor:

@@ -34,6 +34,7 @@ from wanderland_nav.episodes.schema import (
     rotation_from_yaw,
     save_episodes,
 )
+from wanderland_nav.geometry import wrap_angle
 
 FORMAT_VERSION = 1
 HIST_EDGES = (0, 5, 10, 15, 20, 30, 50, 100, math.inf)  # metres, for the length histogram
@@ -182,7 +183,7 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     # phi radians counter-clockwise from the start heading (left > 0)
     d_nav = (pairs.goals - pairs.starts) @ R_ns.T if E else np.zeros((0, 3))
     rho = np.linalg.norm(d_nav[:, :2], axis=-1)
-    phi = (np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0 + np.pi) % (2 * np.pi) - np.pi
+    phi = wrap_angle(np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0)
 
     goal_paths: list[Path | None] = [None] * E
     if goal_image_dir is not None and settings.goal_images and E:
