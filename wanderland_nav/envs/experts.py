@@ -112,9 +112,9 @@ class ExpertPolicy(TensorDictModuleBase):
         self.in_keys = [keys.AGENT_POSITION, keys.AGENT_YAW, keys.EPISODE_INDEX, keys.STEP_COUNT]
         self.out_keys = [keys.ACTION]
         paths = [self._episode_path(env, i, source) for i in range(len(env.episodes))]  # nav frame [P_i, 3]
-        padded = torch.as_tensor(pad_paths(paths, "ExpertPolicy"), dtype=torch.float32, device=env.device)
-        self.register_buffer("paths", padded, persistent=False)  # [E, P, 3]
-        self.register_buffer("cum", arc_lengths(padded), persistent=False)  # [E, P]
+        padded = torch.as_tensor(pad_paths(paths, "ExpertPolicy"))  # [E, P, 3] float64
+        self.register_buffer("paths", padded.to(env.device, torch.float32), persistent=False)
+        self.register_buffer("cum", arc_lengths(padded).to(env.device, torch.float32), persistent=False)  # [E, P]
         self._progress: torch.Tensor | None = None  # [B] arc length reached along each agent's path
 
     @staticmethod
