@@ -98,3 +98,13 @@ def test_frustum_mask_keeps_what_the_camera_sees():
     keep = frustum_mask(means, log_scales, cam, K, 40, 30)
     # in view; behind; far outside; outside by its centre but its 3-sigma footprint reaches the image
     assert keep.tolist() == [True, False, False, True]
+
+
+def test_yaw_rotation_numpy_and_torch_agree():
+    from wanderland_nav.geometry import yaw_rotation
+
+    yaw = np.array([0.0, math.pi / 2, -2.0])
+    R = yaw_rotation(yaw)
+    assert R.shape == (3, 3, 3) and isinstance(R, np.ndarray)
+    np.testing.assert_allclose(R[1] @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)  # +x turns to +y
+    np.testing.assert_allclose(yaw_rotation(torch.as_tensor(yaw)).numpy(), R, atol=0)

@@ -217,6 +217,14 @@ def frustum_mask(means: torch.Tensor, log_scales: torch.Tensor, cam_from_world: 
     return hit.any(dim=0)
 
 
+def yaw_rotation(yaw):
+    """`nav_from_body [..., 3, 3]`: rotation by `yaw [...]` (radians) about +z; numpy or torch in, same out."""
+    xp = torch if isinstance(yaw, torch.Tensor) else np
+    c, s = xp.cos(yaw), xp.sin(yaw)
+    z, o = xp.zeros_like(yaw), xp.ones_like(yaw)
+    return xp.stack([c, -s, z, s, c, z, z, z, o], -1).reshape(*yaw.shape, 3, 3)
+
+
 # OpenCV camera axes expressed in the body frame: cam x = -body y, cam y = -body z, cam z = body x.
 BODY_FROM_OPENCV = torch.tensor([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
@@ -237,9 +245,7 @@ def agent_camera_poses(
     invert, in the frame the Gaussians are stored in.
     """
     dtype, device = position_nav.dtype, position_nav.device
-    cy, sy = torch.cos(yaw), torch.sin(yaw)
-    zero, one = torch.zeros_like(yaw), torch.ones_like(yaw)
-    nav_from_body = torch.stack([cy, -sy, zero, sy, cy, zero, zero, zero, one], -1).reshape(*yaw.shape, 3, 3)
+    nav_from_body = yaw_rotation(yaw)
     cp, sp = math.cos(pitch), math.sin(pitch)
     # rotation about body +y (left) by +pitch tilts the forward axis toward -z (down)
     tilt = torch.tensor([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]], dtype=dtype, device=device)
