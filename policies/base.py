@@ -17,7 +17,8 @@ deterministic (DDIM, eta=0, x_T=0) denoised chain, see `policies/nomad/model.py`
 Why the value head reads *detached* features: the paper fine-tunes released (or, here, behaviour-cloned)
 policies with PPO; a freshly initialised critic back-propagating into the shared trunk would wreck the
 pretrained features in the first updates. `value()` runs the trunk without gradients and trains only
-the value MLP. `freeze_encoders()` additionally freezes the image encoders ("update only the policy").
+the value MLP. `freeze_encoders()` additionally freezes the image encoders ("update only the policy");
+`PolicyConfig.freeze_encoder` says when ("rl": the RL trainer calls it; "always": at construction).
 
 Normalisation statistics (image mean/std, waypoint spacing, NoMaD's action min/max) are registered
 buffers, so they travel in `state_dict()` and in every checkpoint.
@@ -39,6 +40,7 @@ from tensordict.nn import TensorDictModuleBase
 from torch import distributions as D
 from torch import nn
 
+from policies.config import PolicyConfig
 from wanderland_nav import keys as K
 
 log = logging.getLogger(__name__)
@@ -69,9 +71,10 @@ def _flat(x: torch.Tensor, nlead: int) -> torch.Tensor:
 class NavPolicy(TensorDictModuleBase):
     """Base class: preprocessing, the Gaussian head, the value head, freezing, BC targets.
 
-    Subclasses implement `encode(obs) -> feats [N, ...]` (plus `pooled(feats) -> [N, D]` when the trunk
-    returns tokens) and `decode(feats, obs) -> (waypoints [N, K, 2],
-    extras {key: [N, ...]})`, and may override `bc_loss`. `obs` is a dict of flattened `[N, ...]`
+    Built from a `PolicyConfig` (or its fields as keyword overrides). Subclasses set `config_class`
+    and `obs_keys`, create their modules in `build(cfg)`, and implement `encode(obs) -> feats [N, ...]`
+    (plus `pooled(feats) -> [N, D]` when the trunk returns tokens) and `decode(feats, obs) ->
+    (waypoints [N, K, 2], extras {key: [N, ...]})`, and may override `bc_loss`. `obs` is a dict of flattened `[N, ...]`
     tensors holding the subclass's `in_keys`.
     """
 
@@ -79,44 +82,46 @@ class NavPolicy(TensorDictModuleBase):
     obs_keys: tuple[str, ...] = ()
     #: extra output keys beyond the common ones
     extra_out_keys: tuple[str, ...] = ()
+    #: the `PolicyConfig` subclass this policy is built from; set by subclasses
+    config_class: type[PolicyConfig] = PolicyConfig
 
-    def __init__(
-        self,
-        *,
-        num_waypoints: int,
-        context: int,
-        image_size: tuple[int, int],
-        feature_dim: int,
-        waypoint_spacing: float,
-        init_std: float = 0.3,
-        min_std: float = 0.02,
-        value_hidden: int = 128,
-    ):
+    def __init__(self, config: PolicyConfig | None = None, *, min_std: float = 0.02, value_hidden: int = 128,
+                 **overrides):
         super().__init__()
-        if num_waypoints < 1 or context < 1:
-            raise ValueError(f"num_waypoints={num_waypoints} and context={context} must be >= 1")
-        if init_std <= min_std:
-            raise ValueError(f"init_std={init_std} must exceed min_std={min_std}")
-        self.num_waypoints = int(num_waypoints)
-        self.context = int(context)
-        self.image_size = (int(image_size[0]), int(image_size[1]))
-        self.feature_dim = int(feature_dim)
+        if config is not None and overrides:
+            raise TypeError(f"{type(self).__name__}: pass a {self.config_class.__name__} or field overrides, "
+                            f"not both (got overrides {sorted(overrides)})")
+        cfg = config if config is not None else self.config_class(**overrides)
+        if cfg.init_std <= min_std:
+            raise ValueError(f"init_std={cfg.init_std} must exceed min_std={min_std}")
+        self.config = cfg
+        self.num_waypoints = int(cfg.num_waypoints)
+        self.context = int(cfg.context)
+        self.image_size = tuple(cfg.image_size)
+        self.feature_dim = int(cfg.feature_dim)
         self.min_std = float(min_std)
         self.in_keys = list(self.obs_keys)
         self.out_keys = [K.WAYPOINTS, K.LOC, K.SCALE, K.STATE_VALUE, *self.extra_out_keys]
         # normalisation statistics: buffers so they live in the state dict
         self.register_buffer("image_mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1))
         self.register_buffer("image_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1))
-        self.register_buffer("waypoint_spacing", torch.tensor(float(waypoint_spacing)))
+        self.register_buffer("waypoint_spacing", torch.tensor(float(cfg.waypoint_spacing)))
         # std = min_std + softplus(raw): smooth, never below min_std, no exp blow-up
-        raw0 = math.log(math.expm1(init_std - min_std))
+        raw0 = math.log(math.expm1(cfg.init_std - min_std))
         self.std_param = nn.Parameter(torch.full((self.num_waypoints, 2), raw0))
         self.value_head = nn.Sequential(
             nn.Linear(self.feature_dim, value_hidden), nn.Tanh(), nn.Linear(value_hidden, 1)
         )
         self.pretrained_from: str | None = None
+        self.build(cfg)
+        if cfg.freeze_encoder == "always":
+            self.freeze_encoders(True)
 
     # ------------------------------------------------------------------ subclass API
+    def build(self, cfg: PolicyConfig) -> None:
+        """Create the architecture's modules from its config (called once by `__init__`)."""
+        raise NotImplementedError
+
     def encode(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:  # -> [N, ...] trunk output
         raise NotImplementedError
 

@@ -75,3 +75,36 @@ def test_agent_camera_looks_along_heading_in_scene_frame(up):
     T_pitch = G.agent_camera_poses(torch.zeros(1, 3, dtype=torch.float64), torch.zeros(1, dtype=torch.float64),
                                    height=1.0, pitch=0.3, nav_from_scene=R_ns)
     assert (R_sn.T @ T_pitch[0, :3, 2])[2] < 0  # positive pitch looks down
+
+
+def test_pinhole_intrinsics_one_definition():
+    from wanderland_nav.geometry import pinhole_intrinsics
+
+    K = pinhole_intrinsics(64, 48, 90.0)
+    np.testing.assert_allclose(K, [[32.0, 0, 32.0], [0, 32.0, 24.0], [0, 0, 1]], atol=1e-12)
+    Kf = pinhole_intrinsics(64, 48, 180.0, "fisheye")  # equidistant: f = (W/2) / (hfov/2)
+    assert Kf[0, 0] == pytest.approx(32.0 / (math.pi / 2))
+    with pytest.raises(ValueError, match="hfov_deg must be in"):
+        pinhole_intrinsics(64, 48, 180.0)
+
+
+def test_frustum_mask_keeps_what_the_camera_sees():
+    from wanderland_nav.geometry import frustum_mask, pinhole_intrinsics
+
+    K = torch.as_tensor(pinhole_intrinsics(40, 30, 90.0), dtype=torch.float32)[None]
+    cam = torch.eye(4)[None]  # camera at the origin looking along +z
+    means = torch.tensor([[0.0, 0.0, 5.0], [0.0, 0.0, -5.0], [30.0, 0.0, 5.0], [6.0, 0.0, 5.0]])
+    log_scales = torch.log(torch.tensor([[0.1] * 3, [0.1] * 3, [0.1] * 3, [2.0] * 3]))
+    keep = frustum_mask(means, log_scales, cam, K, 40, 30)
+    # in view; behind; far outside; outside by its centre but its 3-sigma footprint reaches the image
+    assert keep.tolist() == [True, False, False, True]
+
+
+def test_yaw_rotation_numpy_and_torch_agree():
+    from wanderland_nav.geometry import yaw_rotation
+
+    yaw = np.array([0.0, math.pi / 2, -2.0])
+    R = yaw_rotation(yaw)
+    assert R.shape == (3, 3, 3) and isinstance(R, np.ndarray)
+    np.testing.assert_allclose(R[1] @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)  # +x turns to +y
+    np.testing.assert_allclose(yaw_rotation(torch.as_tensor(yaw)).numpy(), R, atol=0)

@@ -109,13 +109,6 @@ def rotmat_to_quat(R: torch.Tensor) -> torch.Tensor:
     return q.reshape(*R.shape[:-2], 4)
 
 
-def yaw_to_quat(yaw: torch.Tensor) -> torch.Tensor:
-    """Heading about +z (nav frame) `[...]` -> wxyz quaternion `[..., 4]`."""
-    half = 0.5 * yaw
-    zero = torch.zeros_like(yaw)
-    return torch.stack([torch.cos(half), zero, zero, torch.sin(half)], -1)
-
-
 # --------------------------------------------------------------------------- rigid transforms
 
 
@@ -155,9 +148,9 @@ def validate_rigid(T, *, what: str, tol: float = 1e-3) -> None:
         )
 
 
-def wrap_angle(a: torch.Tensor) -> torch.Tensor:
-    """Wrap angles to [-pi, pi)."""
-    return torch.remainder(a + math.pi, 2 * math.pi) - math.pi
+def wrap_angle(a):
+    """Wrap angles (radians) to [-pi, pi): a float, a numpy array or a torch tensor, same type back."""
+    return (a + math.pi) % (2 * math.pi) - math.pi  # floor modulo (torch: remainder), so the result is >= -pi
 
 
 def world_to_body_2d(points_xy: torch.Tensor, agent_xy: torch.Tensor, agent_yaw: torch.Tensor) -> torch.Tensor:
@@ -172,6 +165,64 @@ def body_to_world_2d(points_body: torch.Tensor, agent_xy: torch.Tensor, agent_ya
     c, s = torch.cos(agent_yaw).unsqueeze(-1), torch.sin(agent_yaw).unsqueeze(-1)
     x, y = points_body[..., 0], points_body[..., 1]
     return torch.stack([c * x - s * y, s * x + c * y], -1) + agent_xy.unsqueeze(-2)
+
+
+# --------------------------------------------------------------------------- cameras
+
+
+def pinhole_intrinsics(width: int, height: int, hfov_deg: float, camera_model: str = "pinhole") -> np.ndarray:
+    """`K [3, 3]` (float64) with square pixels and the principal point at the image centre.
+
+    Pinhole: `f = (W/2) / tan(hfov/2)`; fisheye (equidistant, `r = f * theta`, gsplat's model):
+    `f = (W/2) / (hfov/2)`. One definition for the agent camera, goal views and the demo capture,
+    so a view rendered anywhere in the framework has the same intrinsics for the same size and fov.
+    """
+    if camera_model == "pinhole" and not 0 < hfov_deg < 180:
+        raise ValueError(f"pinhole camera: hfov_deg must be in (0, 180), got {hfov_deg}")
+    half = math.radians(hfov_deg) / 2
+    f = (width / 2) / (math.tan(half) if camera_model == "pinhole" else half)
+    return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]], dtype=np.float64)
+
+
+@torch.no_grad()
+def frustum_mask(means: torch.Tensor, log_scales: torch.Tensor, cam_from_world: torch.Tensor, K: torch.Tensor,
+                 width: int, height: int, *, camera_model: str = "pinhole", near: float = 0.01,
+                 eps2d: float = 0.3, pad_px: float = 2.0) -> torch.Tensor:
+    """bool `[N]`: the Gaussian may touch the image of at least one of the C cameras.
+
+    means `[N, 3]`, log_scales `[N, 3]` (scene frame), cam_from_world `[C, 4, 4]`, K `[C, 3, 3]`.
+    Conservative bound of the splat renderer's projection: a Gaussian is dropped only if its mean is
+    behind the near plane or a disc containing its 3-sigma screen footprint misses the image. The
+    footprint uses gsplat's clamped Jacobian (tangents limited to 1.3x the field of view), an isotropic
+    covariance with the largest scale and the 2-D dilation `eps2d`, so culling first never changes a
+    rendered pixel. Non-pinhole models (a fisheye can see beyond 180 degrees) keep every Gaussian.
+    """
+    if camera_model != "pinhole":
+        return torch.ones(means.shape[0], dtype=torch.bool, device=means.device)
+    s2 = (2.0 * log_scales.max(dim=-1).values).exp()  # [N] largest variance
+    p = torch.einsum("cij,nj->cni", cam_from_world[:, :3, :3], means) + cam_from_world[:, None, :3, 3]  # [C,N,3]
+    x, y, z = p.unbind(-1)
+    zs = z.clamp_min(near)
+    fx, fy, cx, cy = K[:, 0, 0, None], K[:, 1, 1, None], K[:, 0, 2, None], K[:, 1, 2, None]
+    lim_x = 1.3 * 0.5 * width / fx  # gsplat's clamp of the tangents used in the Jacobian
+    lim_y = 1.3 * 0.5 * height / fy
+    tx = (x / zs).clamp(-lim_x, lim_x)
+    ty = (y / zs).clamp(-lim_y, lim_y)
+    # ||J||_F^2 for J = [[fx/z, 0, -fx tx/z], [0, fy/z, -fy ty/z]] bounds the largest eigenvalue of J J^T
+    jf2 = (fx * fx * (1 + tx * tx) + fy * fy * (1 + ty * ty)) / (zs * zs)
+    radius = 3.0 * torch.sqrt(s2 * jf2 + eps2d) + pad_px  # [C, N] pixels
+    u = fx * x / zs + cx
+    v = fy * y / zs + cy
+    hit = (z >= near) & (u + radius >= 0) & (u - radius <= width) & (v + radius >= 0) & (v - radius <= height)
+    return hit.any(dim=0)
+
+
+def yaw_rotation(yaw):
+    """`nav_from_body [..., 3, 3]`: rotation by `yaw [...]` (radians) about +z; numpy or torch in, same out."""
+    xp = torch if isinstance(yaw, torch.Tensor) else np
+    c, s = xp.cos(yaw), xp.sin(yaw)
+    z, o = xp.zeros_like(yaw), xp.ones_like(yaw)
+    return xp.stack([c, -s, z, s, c, z, z, z, o], -1).reshape(*yaw.shape, 3, 3)
 
 
 # OpenCV camera axes expressed in the body frame: cam x = -body y, cam y = -body z, cam z = body x.
@@ -194,9 +245,7 @@ def agent_camera_poses(
     invert, in the frame the Gaussians are stored in.
     """
     dtype, device = position_nav.dtype, position_nav.device
-    cy, sy = torch.cos(yaw), torch.sin(yaw)
-    zero, one = torch.zeros_like(yaw), torch.ones_like(yaw)
-    nav_from_body = torch.stack([cy, -sy, zero, sy, cy, zero, zero, zero, one], -1).reshape(*yaw.shape, 3, 3)
+    nav_from_body = yaw_rotation(yaw)
     cp, sp = math.cos(pitch), math.sin(pitch)
     # rotation about body +y (left) by +pitch tilts the forward axis toward -z (down)
     tilt = torch.tensor([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]], dtype=dtype, device=device)

@@ -10,6 +10,16 @@ Frames
   the agent's feet. This is the frame CityWalker, NoMaD and MBRA predict waypoints in.
 
 Shapes below leave out the batch dimensions `[*B]` (the env's `batch_size`, usually `[B]`).
+
+Key tree of an env step (`td` after `reset`, `td["next"]` after `step`)::
+
+    rgb, depth?, past_positions, goal_vector, goal_pose,      observations: what a policy may read
+    goal_image, has_goal_image, instruction_tokens
+    privileged/                                               ground truth: experts, metrics, logs
+        episode_index, step_count, agent_position, agent_yaw,
+        distance_to_goal, success, intervention, collision
+    action                                                    written by the policy
+    reward, done, terminated, truncated                       step outputs (in "next")
 """
 
 # --------------------------------------------------------------------------- observations
@@ -40,21 +50,35 @@ HAS_GOAL_IMAGE = "has_goal_image"
 INSTRUCTION_TOKENS = "instruction_tokens"
 """int64 `[L]`: the episode's instruction as UTF-8 bytes + 1, right-padded with 0 (no tokenizer needed)."""
 
-EPISODE_INDEX = "episode_index"
+# --------------------------------------------------------------------------- privileged state
+PRIVILEGED = "privileged"
+"""Sub-TensorDict of the env's state that no policy may read: the simulator's ground truth, for the
+expert, the trainer's statistics, BC labels, metrics and logging (TorchRL's custom envs keep such state
+in a nested key, e.g. the pendulum's `("params", ...)`). Every key below is `(PRIVILEGED, name)`."""
+
+EPISODE_INDEX = (PRIVILEGED, "episode_index")
 """int64 `[1]`: index of the running episode in the env's episode list."""
 
-STEP_COUNT = "step_count"
+STEP_COUNT = (PRIVILEGED, "step_count")
 """int64 `[1]`: control steps taken in the running episode."""
 
-# --------------------------------------------------------------------------- privileged state
-AGENT_POSITION = "agent_position"
-"""float32 `[3]`: agent position (feet) in the nav frame, metres. Privileged: experts and logging."""
+AGENT_POSITION = (PRIVILEGED, "agent_position")
+"""float32 `[3]`: agent position (feet) in the nav frame, metres."""
 
-AGENT_YAW = "agent_yaw"
+AGENT_YAW = (PRIVILEGED, "agent_yaw")
 """float32 `[1]`: agent heading in the nav frame, radians, counter-clockwise from +x."""
 
-DISTANCE_TO_GOAL = "distance_to_goal"
+DISTANCE_TO_GOAL = (PRIVILEGED, "distance_to_goal")
 """float32 `[1]`: geodesic distance from the agent to the goal on the navmesh, metres."""
+
+SUCCESS = (PRIVILEGED, "success")
+"""bool `[1]`: the episode ended within the goal radius."""
+
+INTERVENTION = (PRIVILEGED, "intervention")
+"""bool `[1]`: the episode ended by intervention (stuck, no progress, left the navigable region)."""
+
+COLLISION = (PRIVILEGED, "collision")
+"""bool `[1]`: this step's motion was blocked or deflected by the navmesh boundary."""
 
 # --------------------------------------------------------------------------- actions
 ACTION = "action"
@@ -89,15 +113,6 @@ TERMINATED = "terminated"
 TRUNCATED = "truncated"
 """bool `[1]` each, TorchRL's convention: done = terminated | truncated; truncated = timeout."""
 
-SUCCESS = "success"
-"""bool `[1]`: the episode ended within the goal radius."""
-
-INTERVENTION = "intervention"
-"""bool `[1]`: the episode ended by intervention (stuck, no progress, left the navigable region)."""
-
-COLLISION = "collision"
-"""bool `[1]`: this step's motion was blocked or deflected by the navmesh boundary."""
-
 RESET = "_reset"
 """bool `[1]`: TorchRL's partial-reset mask."""
 
@@ -110,4 +125,9 @@ OBSERVATION_KEYS = (
     HAS_GOAL_IMAGE,
     INSTRUCTION_TOKENS,
 )
-"""Keys every policy may read (plus `DEPTH` when enabled). Privileged keys are not in this list."""
+"""Keys every policy may read (plus `DEPTH` when enabled): the env's observation spec is exactly these
+and the `PRIVILEGED` sub-spec."""
+
+PRIVILEGED_KEYS = (EPISODE_INDEX, STEP_COUNT, AGENT_POSITION, AGENT_YAW, DISTANCE_TO_GOAL, SUCCESS, INTERVENTION,
+                   COLLISION)
+"""Every `(PRIVILEGED, name)` key the env writes."""

@@ -10,8 +10,6 @@ depends on it. All files are written atomically (`wanderland_nav.atomic`).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import logging
 import time
 from pathlib import Path
@@ -20,6 +18,7 @@ import numpy as np
 import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
+from wanderland_nav.cache import json_digest, read_record
 from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.model import Scene
@@ -31,22 +30,12 @@ NAVMESH = "navmesh.npz"
 _FORMAT = 1  # bump when the meaning of an artefact changes, so stale caches rebuild
 
 
-def _hash(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
 def _sidecar(path: Path) -> Path:
     return path.with_suffix(".json")
 
 
 def _read_sidecar(path: Path) -> dict | None:
-    p = _sidecar(path)
-    if not p.is_file():
-        return None
-    try:
-        return json.loads(p.read_text())
-    except (json.JSONDecodeError, OSError):
-        return None
+    return read_record(_sidecar(path))
 
 
 def scene_inputs(root: Path) -> list[Path]:
@@ -85,7 +74,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
     """Write `collision_mesh.ply` (+ sidecar) for `scene` unless up to date. Returns (path, sidecar)."""
     out = scene.root / COLLISION_MESH
     inputs = scene_inputs(scene.root)
-    h = _hash({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
+    h = json_digest({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
     if not force and _up_to_date(out, inputs, h):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
@@ -117,7 +106,7 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     cm = scene.root / COLLISION_MESH
     out = scene.root / NAVMESH
     cm_side = _read_sidecar(cm) or {}
-    h = _hash({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
+    h = json_digest({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
     if not force and _up_to_date(out, [cm], h):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)

@@ -381,6 +381,8 @@ def expert_rollout(episodes, nav_from_scene: np.ndarray, *, up_axis: str, camera
     Replay renders the camera along it, so a researcher sees what the expert saw. `stride` keeps
     every n-th sample (and the last), for long paths or quick looks.
     """
+    from wanderland_nav.envs.experts import waypoints_along_samples
+
     if stride < 1:
         raise ValueError(f"expert_rollout: stride must be >= 1, got {stride}")
     R_ns = np.asarray(nav_from_scene, np.float64)
@@ -397,10 +399,7 @@ def expert_rollout(episodes, nav_from_scene: np.ndarray, *, up_axis: str, camera
         seg = np.linalg.norm(np.diff(p, axis=0), axis=-1)
         remain = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])  # [L]
         L = len(p) - 1  # transitions
-        j = np.minimum(np.arange(L)[:, None] + 1 + np.arange(num_waypoints)[None], len(p) - 1)  # [L, K]
-        rel = p[j, :2] - p[:L, None, :2]
-        c, s = np.cos(h[:L])[:, None], np.sin(h[:L])[:, None]
-        wps.append(np.stack([c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]], -1))
+        wps.append(waypoints_along_samples(p, h[:L], num_waypoints))
         pos.append(p[:L]), yaw.append(h[:L]), nxt_pos.append(p[1:]), nxt_yaw.append(h[1:])
         dist.append(remain[1:]), ep_idx.append(np.full(L, i)), step.append(np.arange(L))
         dn = np.zeros(L, bool)

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from policies.config import PolicyConfig
+
 
 @dataclass
-class CityWalkerConfig:
+class CityWalkerConfig(PolicyConfig):
     context: int = 5
     num_waypoints: int = 5
     encoder: str = "dinov2"              # "dinov2" (ViT-B/14-shaped) or "cnn" (CPU)
@@ -20,6 +22,3 @@ class CityWalkerConfig:
     heads: int = 4
     num_freqs: int = 6
     max_range: float = 50.0              # metres: Fourier normaliser for coordinates
-    waypoint_spacing: float = 0.5        # metres per waypoint step: inputs/outputs are divided by it
-    init_std: float = 0.3
-    freeze_encoder: bool = False

@@ -24,11 +24,9 @@ class CityWalkerPolicy(NavPolicy):
     obs_keys = (K.RGB, K.PAST_POSITIONS, K.GOAL_VECTOR)
     extra_out_keys = (K.ARRIVAL_LOGIT,)
 
-    def __init__(self, config: CityWalkerConfig | None = None, **overrides):
-        cfg = config or CityWalkerConfig(**overrides)
-        super().__init__(num_waypoints=cfg.num_waypoints, context=cfg.context, image_size=tuple(cfg.image_size),
-                         feature_dim=cfg.dim, waypoint_spacing=cfg.waypoint_spacing, init_std=cfg.init_std)
-        self.config = cfg
+    config_class = CityWalkerConfig
+
+    def build(self, cfg: CityWalkerConfig) -> None:
         self.encoder = make_encoder(cfg.encoder, cfg.dim, image_size=self.image_size, weights=cfg.encoder_weights,
                                     vit=dict(cfg.vit))
         coord_in = 3 + 4 * cfg.num_freqs
@@ -44,8 +42,6 @@ class CityWalkerPolicy(NavPolicy):
         self.arrive_head = nn.Linear(cfg.dim, 1)
         nn.init.zeros_(self.wp_head.weight)
         nn.init.zeros_(self.wp_head.bias)
-        if cfg.freeze_encoder:
-            self.freeze_encoders(True)
 
     def encoder_modules(self):
         return [self.encoder]

@@ -14,11 +14,9 @@ from wanderland_nav import keys as K
 class CNNPolicy(NavPolicy):
     obs_keys = (K.RGB, K.GOAL_VECTOR)
 
-    def __init__(self, config: CNNConfig | None = None, **overrides):
-        cfg = config or CNNConfig(**overrides)
-        super().__init__(num_waypoints=cfg.num_waypoints, context=cfg.context, image_size=tuple(cfg.image_size),
-                         feature_dim=cfg.feature_dim, waypoint_spacing=cfg.waypoint_spacing, init_std=cfg.init_std)
-        self.config = cfg
+    config_class = CNNConfig
+
+    def build(self, cfg: CNNConfig) -> None:
         self.encoder = SmallCNN(cfg.feature_dim)
         goal_in = 3 + 4 * cfg.num_freqs
         self.goal_mlp = nn.Sequential(nn.Linear(goal_in, cfg.feature_dim), nn.SiLU())

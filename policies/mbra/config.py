@@ -4,17 +4,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from policies.config import PolicyConfig
+
 
 @dataclass
-class MBRAConfig:
+class MBRAConfig(PolicyConfig):
     context: int = 5
     num_waypoints: int = 8
     image_size: tuple[int, int] = (96, 96)
     dim: int = 256
     depth: int = 4
     heads: int = 4
-    waypoint_spacing: float = 0.5        # metres per normalised unit (positions are divided by it)
     goal_range: float = 50.0             # metres: goal position normaliser
     heading_weight: float = 0.5          # BC weight of the (cos, sin) heading term
-    init_std: float = 0.3
-    freeze_encoder: bool = False

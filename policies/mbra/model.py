@@ -22,11 +22,9 @@ from wanderland_nav import keys as K
 class MBRAPolicy(NavPolicy):
     obs_keys = (K.RGB, K.GOAL_POSE)
 
-    def __init__(self, config: MBRAConfig | None = None, **overrides):
-        cfg = config or MBRAConfig(**overrides)
-        super().__init__(num_waypoints=cfg.num_waypoints, context=cfg.context, image_size=tuple(cfg.image_size),
-                         feature_dim=cfg.dim, waypoint_spacing=cfg.waypoint_spacing, init_std=cfg.init_std)
-        self.config = cfg
+    config_class = MBRAConfig
+
+    def build(self, cfg: MBRAConfig) -> None:
         self.encoder = SmallCNN(cfg.dim)
         self.goal_embed = nn.Sequential(nn.Linear(5, cfg.dim), nn.SiLU(), nn.Linear(cfg.dim, cfg.dim))
         self.pos_embed = nn.Parameter(torch.randn(1, cfg.context + 1, cfg.dim) * 0.02)
@@ -36,8 +34,6 @@ class MBRAPolicy(NavPolicy):
         self.head = nn.Sequential(nn.LayerNorm(cfg.dim), nn.Linear(cfg.dim, cfg.num_waypoints * 4))
         nn.init.zeros_(self.head[1].weight)
         nn.init.zeros_(self.head[1].bias)
-        if cfg.freeze_encoder:
-            self.freeze_encoders(True)
 
     def encoder_modules(self):
         return [self.encoder]

@@ -7,9 +7,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from policies.config import PolicyConfig
+
 
 @dataclass
-class NoMaDConfig:
+class NoMaDConfig(PolicyConfig):
     context: int = 4
     num_waypoints: int = 8
     image_size: tuple[int, int] = (96, 96)
@@ -20,9 +22,10 @@ class NoMaDConfig:
     unet_hidden: int = 128
     action_min: tuple[float, float] = (-2.5, -4.0)
     action_max: tuple[float, float] = (5.0, 4.0)
-    waypoint_spacing: float = 0.5        # metres per normalised unit (released: MAX_V / RATE)
     max_distance: int = 20               # temporal-distance head: steps, clipped
     dist_weight: float = 1e-4            # released alpha for the distance loss
     use_goal_vector: bool = False        # demo addition: a goal-vector token (absent from released NoMaD)
-    init_std: float = 0.3
-    freeze_encoder: bool = False
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.action_min, self.action_max = tuple(self.action_min), tuple(self.action_max)

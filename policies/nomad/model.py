@@ -85,11 +85,9 @@ class NoisePredNet(nn.Module):
 class NoMaDPolicy(NavPolicy):
     obs_keys = (K.RGB, K.GOAL_IMAGE, K.HAS_GOAL_IMAGE, K.GOAL_VECTOR)
 
-    def __init__(self, config: NoMaDConfig | None = None, **overrides):
-        cfg = config or NoMaDConfig(**overrides)
-        super().__init__(num_waypoints=cfg.num_waypoints, context=cfg.context, image_size=tuple(cfg.image_size),
-                         feature_dim=cfg.dim, waypoint_spacing=cfg.waypoint_spacing, init_std=cfg.init_std)
-        self.config = cfg
+    config_class = NoMaDConfig
+
+    def build(self, cfg: NoMaDConfig) -> None:
         self.obs_encoder = SmallCNN(cfg.dim)
         self.goal_encoder = SmallCNN(cfg.dim, in_channels=6)
         n_tok = cfg.context + 1 + int(cfg.use_goal_vector)
@@ -106,8 +104,6 @@ class NoMaDPolicy(NavPolicy):
         self.register_buffer("alphas_cumprod", torch.cumprod(1 - betas, 0))
         self.register_buffer("action_min", torch.tensor(cfg.action_min, dtype=torch.float32))
         self.register_buffer("action_max", torch.tensor(cfg.action_max, dtype=torch.float32))
-        if cfg.freeze_encoder:
-            self.freeze_encoders(True)
 
     def encoder_modules(self):
         return [self.obs_encoder, self.goal_encoder]
@@ -195,7 +191,7 @@ class NoMaDPolicy(NavPolicy):
         diff = F.mse_loss(self.noise_pred(xt, t, cond), eps)
         metrics = {"diffusion_mse": float(diff.detach())}
         loss = diff
-        if K.DISTANCE_TO_GOAL in td.keys():
+        if K.DISTANCE_TO_GOAL in td.keys(True):
             has_goal = obs[K.HAS_GOAL_IMAGE].view(n).float()
             label = (td.get(K.DISTANCE_TO_GOAL).reshape(n) / self.waypoint_spacing).clamp(0, self.config.max_distance)
             err = (self.dist_head(cond).view(n) - label) ** 2

@@ -106,6 +106,24 @@ def test_nomad_distance_head_trains_only_on_goal_samples():
     assert all(q.grad is None or q.grad.abs().sum() == 0 for q in p.dist_head.parameters())
 
 
+def test_nomad_temporal_distance_is_what_bc_supervises():
+    p = nomad()
+    obs = make_obs((4,))
+    obs[K.HAS_GOAL_IMAGE] = torch.ones(4, 1, dtype=torch.bool)
+    obs[K.DISTANCE_TO_GOAL] = torch.full((4, 1), 1.5)  # privileged label: 3 spacings of 0.5 m
+    _, m = p.bc_loss(obs, torch.randn(4, 8, 2))
+    d = p.temporal_distance(obs)
+    assert d.shape == (4, 1)
+    assert m["dist_mse"] == pytest.approx(float(((d.detach() - 3.0) ** 2).mean()), rel=1e-5)
+
+
+def test_mbra_untrained_headings_point_forward():
+    p = make_policy("mbra", **TINY["mbra"])
+    h = p.predict_headings(make_obs((2, 3)))  # zero-initialised head + forward prior
+    assert h.shape == (2, 3, p.num_waypoints, 2)
+    torch.testing.assert_close(h, torch.tensor([1.0, 0.0]).expand_as(h))
+
+
 # ------------------------------------------------------------------------------------------ DINOv2
 def tiny_vit(img):
     return DinoViT(img_size=img, patch_size=14, embed_dim=32, depth=2, num_heads=2)
@@ -149,7 +167,7 @@ def test_random_dinov2_is_logged(caplog):
 def test_citywalker_with_vit_encoder_runs():
     torch.manual_seed(0)
     p = make_policy("citywalker", encoder="dinov2", image_size=(28, 28), dim=32, depth=1, heads=2,
-                    vit=dict(embed_dim=32, depth=1, num_heads=2), freeze_encoder=True)
+                    vit=dict(embed_dim=32, depth=1, num_heads=2), freeze_encoder="always")
     td = p(make_obs((2,)))
     assert td[K.WAYPOINTS].shape == (2, 5, 2)
     assert not any(q.requires_grad for q in p.encoder.parameters())

@@ -10,6 +10,7 @@ import torch
 from fake_env import FakeNavEnv
 
 from policies import make_policy
+from wanderland_nav import keys as K
 from wanderland_nav.rl.bc import BCConfig, ExpertActor, ExpertPaths, train_bc
 
 
@@ -52,7 +53,7 @@ def _success_rate(env, actor, steps=24):
     with torch.no_grad():
         r = env.rollout(steps, actor, break_when_any_done=False)
     done = r["next", "done"].squeeze(-1)
-    return float(r["next", "success"].squeeze(-1)[done].float().mean())
+    return float(r["next", K.SUCCESS].squeeze(-1)[done].float().mean())
 
 
 def test_bc_in_fake_env_beats_untrained():

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from wanderland_nav.envs.config import CameraConfig
-from wanderland_nav.geometry import agent_camera_poses, invert_rigid
+from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
 
 Renderer = Callable[..., object]
 """`render(gaussians, cam_from_world[C,4,4], K[C,3,3], width, height, *, render_mode, background,
@@ -27,9 +27,7 @@ camera_model) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or Non
 
 def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
     """`K [3, 3]` float32 for the configured resolution, field of view and camera model."""
-    half = math.radians(cfg.hfov_deg) / 2
-    f = (cfg.width / 2) / (math.tan(half) if cfg.camera_model == "pinhole" else half)
-    return torch.tensor([[f, 0.0, cfg.width / 2], [0.0, f, cfg.height / 2], [0.0, 0.0, 1.0]], dtype=torch.float32)
+    return torch.as_tensor(pinhole_intrinsics(cfg.width, cfg.height, cfg.hfov_deg, cfg.camera_model), dtype=torch.float32)
 
 
 class AgentCamera:

@@ -1,4 +1,8 @@
-"""Reference policies that run through the same API as learned ones: the path-following expert and random.
+"""Expert waypoints along a path, and the reference policies built on them: the path-following expert and random.
+
+`waypoints_along_path` is the one definition of "what a perfect waypoint policy outputs" (K points
+ahead along a path, in the body frame): `ExpertPolicy` below, the BC labels (`rl.bc.ExpertPaths`) and
+the expert replay (`rollouts.expert_rollout`, via `waypoints_along_samples`) all call it.
 
 The expert is privileged: it reads `AGENT_POSITION`, `AGENT_YAW`, `EPISODE_INDEX` and
 `STEP_COUNT` and follows each episode's expert path (the navmesh shortest path stored as
@@ -26,6 +30,63 @@ from wanderland_nav.geometry import world_to_body_2d
 PATH_SOURCES = ("reference", "navmesh")
 
 
+def pad_paths(paths, where: str = "paths", dim: int = 3) -> np.ndarray:
+    """E polylines `[P_i, dim]` -> one array `[E, P, dim]` (float64), each padded by repeating its last point.
+
+    The padding adds zero-length segments, so arc lengths and interpolation along a padded path are
+    those of the original. Raises naming `where` and the episode for an empty or ragged path.
+    """
+    if not len(paths):
+        raise ValueError(f"{where}: no episodes")
+    arrs = [np.asarray(p, np.float64) for p in paths]
+    for i, p in enumerate(arrs):
+        if p.ndim != 2 or p.shape[1] != dim or len(p) < 1:
+            raise ValueError(f"{where}: episode {i} path must be [L>=1, {dim}], got {p.shape}")
+    P = max(len(p) for p in arrs)
+    return np.stack([np.concatenate([p, np.repeat(p[-1:], P - len(p), 0)]) for p in arrs])
+
+
+def arc_lengths(path: torch.Tensor) -> torch.Tensor:
+    """Cumulative arc length `[..., P]` (0 at the first point) of polylines `[..., P, D]`."""
+    seg = (path[..., 1:, :] - path[..., :-1, :]).norm(dim=-1)
+    return torch.cat([torch.zeros_like(seg[..., :1]), seg.cumsum(-1)], dim=-1)
+
+
+def waypoints_along_path(path: torch.Tensor, cum: torch.Tensor, start: torch.Tensor, agent_xy: torch.Tensor,
+                         agent_yaw: torch.Tensor, num_waypoints: int, spacing: float) -> torch.Tensor:
+    """The expert's K waypoints: path points at arc lengths `start + spacing * (1..K)` (clamped to the
+    path's end), in the agent's body frame (x forward, y left), `[N, K, 2]` metres.
+
+    path `[N, P, D]` (nav frame, D = 2 or 3, padded as `pad_paths`), cum `[N, P]` its `arc_lengths`,
+    start `[N]` the arc length the agent has reached, agent_xy `[N, 2]`, agent_yaw `[N]`. This is the
+    one definition of "what a perfect waypoint policy outputs": the BC labels, the evaluation expert
+    and the expert replay all call it, each with its own notion of where the agent is on the path.
+    """
+    steps = torch.arange(1, num_waypoints + 1, device=path.device, dtype=cum.dtype) * spacing
+    target = torch.minimum(start[:, None].to(cum.dtype) + steps, cum[:, -1:])  # [N, K]
+    hi = torch.searchsorted(cum.contiguous(), target.contiguous(), right=False).clamp(1, cum.shape[1] - 1)
+    lo = hi - 1
+    c_lo, c_hi = cum.gather(1, lo), cum.gather(1, hi)
+    w = ((target - c_lo) / (c_hi - c_lo).clamp_min(1e-6)).clamp(0, 1)[..., None]  # [N, K, 1]
+    dim = path.shape[-1]
+    p_lo = path.gather(1, lo[..., None].expand(-1, -1, dim))
+    p_hi = path.gather(1, hi[..., None].expand(-1, -1, dim))
+    pts = p_lo * (1 - w) + p_hi * w  # [N, K, D]
+    return world_to_body_2d(pts[..., :2], agent_xy[:, :2].to(pts.dtype), agent_yaw.reshape(-1).to(pts.dtype))
+
+
+def waypoints_along_samples(path: np.ndarray, yaw: np.ndarray, num_waypoints: int) -> np.ndarray:
+    """Body-frame waypoints `[L, K, 2]` for an agent at each of the first L samples of `path [L+1, D]`
+    (nav frame) with headings `yaw [L]`: `waypoints_along_path` spaced by the path's mean sample
+    spacing, i.e. the next K samples of a uniformly resampled path (an expert replay's "prediction")."""
+    p = torch.as_tensor(np.asarray(path, np.float64))
+    cum = arc_lengths(p)  # [L+1]
+    L = len(yaw)
+    wp = waypoints_along_path(p.expand(L, -1, -1), cum.expand(L, -1), cum[:L], p[:L, :2],
+                              torch.as_tensor(np.asarray(yaw, np.float64)), num_waypoints, float(cum[-1]) / L)
+    return wp.numpy()
+
+
 class ExpertPolicy(TensorDictModuleBase):
     """Follows each episode's shortest path; waypoint or velocity actions to match `env.action_spec`.
 
@@ -51,13 +112,9 @@ class ExpertPolicy(TensorDictModuleBase):
         self.in_keys = [keys.AGENT_POSITION, keys.AGENT_YAW, keys.EPISODE_INDEX, keys.STEP_COUNT]
         self.out_keys = [keys.ACTION]
         paths = [self._episode_path(env, i, source) for i in range(len(env.episodes))]  # nav frame [P_i, 3]
-        P = max(len(p) for p in paths)
-        padded = np.stack([np.concatenate([p, np.repeat(p[-1:], P - len(p), 0)]) for p in paths])  # [E, P, 3]
-        seg = np.linalg.norm(np.diff(padded, axis=1), axis=-1)  # [E, P-1]
-        cum = np.concatenate([np.zeros((len(paths), 1)), np.cumsum(seg, axis=1)], axis=1)  # [E, P]
-        dev = env.device
-        self.register_buffer("paths", torch.as_tensor(padded, dtype=torch.float32, device=dev), persistent=False)
-        self.register_buffer("cum", torch.as_tensor(cum, dtype=torch.float32, device=dev), persistent=False)
+        padded = torch.as_tensor(pad_paths(paths, "ExpertPolicy"))  # [E, P, 3] float64
+        self.register_buffer("paths", padded.to(env.device, torch.float32), persistent=False)
+        self.register_buffer("cum", arc_lengths(padded).to(env.device, torch.float32), persistent=False)  # [E, P]
         self._progress: torch.Tensor | None = None  # [B] arc length reached along each agent's path
 
     @staticmethod
@@ -119,7 +176,7 @@ class ExpertPolicy(TensorDictModuleBase):
         s_prev = torch.where(fresh, torch.zeros_like(s_prev), s_prev)
         s = self._project(pos, ep, s_prev)
         self._progress = s
-        wp = self._waypoints(pos, yaw, ep, s)  # [B, K, 2] body frame
+        wp = waypoints_along_path(self.paths[ep], self.cum[ep], s, pos, yaw, self.num_waypoints, self.spacing)
         if self.mode == "velocity":
             v, omega = track_point_command(wp[:, 0], self.kin.control_period, self.kin.control_period, self.kin)
             action = torch.stack([v, omega], -1)
@@ -143,21 +200,6 @@ class ExpertPolicy(TensorDictModuleBase):
         s_best = arc.gather(-1, best[:, None]).squeeze(-1)
         s_best = torch.where(ok.any(-1), s_best, s_prev)
         return torch.maximum(s_prev, s_best)
-
-    def _waypoints(self, pos, yaw, ep, s) -> torch.Tensor:
-        """K path points at arc lengths s + spacing * (1..K) (clamped to the goal), body frame `[B, K, 2]`."""
-        path, cum = self.paths[ep], self.cum[ep]  # [B, P, 3], [B, P]
-        K = self.num_waypoints
-        steps = torch.arange(1, K + 1, device=pos.device, dtype=pos.dtype) * self.spacing
-        target = torch.minimum(s[:, None] + steps, cum[:, -1:])  # [B, K]
-        i = (torch.searchsorted(cum.contiguous(), target.contiguous(), right=True) - 1).clamp(0, path.shape[1] - 2)
-        c0, c1 = cum.gather(1, i), cum.gather(1, i + 1)
-        frac = ((target - c0) / (c1 - c0).clamp_min(1e-9)).clamp(0.0, 1.0)
-        p0 = path.gather(1, i[..., None].expand(*i.shape, 3))
-        p1 = path.gather(1, (i + 1)[..., None].expand(*i.shape, 3))
-        pts = p0 + frac[..., None] * (p1 - p0)
-        return world_to_body_2d(pts[..., :2], pos[:, :2], yaw)
-
 
 class RandomPolicy(TensorDictModuleBase):
     """Uniform actions within `action_spec`'s bounds from its own seeded generator (the lower bound)."""

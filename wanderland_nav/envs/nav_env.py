@@ -140,6 +140,7 @@ class NavEnv(EnvBase):
             keys.GOAL_IMAGE: img(H, W, 3),
             keys.HAS_GOAL_IMAGE: flag(),
             keys.INSTRUCTION_TOKENS: i64(L),
+            # ground truth no policy may read: nested under keys.PRIVILEGED by the keys themselves
             keys.EPISODE_INDEX: i64(1),
             keys.STEP_COUNT: i64(1),
             keys.AGENT_POSITION: f32(3),
@@ -367,6 +368,7 @@ class NavEnv(EnvBase):
             keys.GOAL_IMAGE: self._agent_goal_image,  # per-agent copies, replaced at reset only
             keys.HAS_GOAL_IMAGE: self._agent_has_goal_image,
             keys.INSTRUCTION_TOKENS: self._agent_tokens,
+            # (keys.PRIVILEGED, ...): the nested sub-TensorDict of ground truth
             keys.EPISODE_INDEX: ep.unsqueeze(-1),
             keys.STEP_COUNT: self._steps.unsqueeze(-1),
             keys.AGENT_POSITION: self._pos,

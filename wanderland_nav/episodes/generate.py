@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from wanderland_nav.cache import json_digest
 from wanderland_nav.episodes.goal_images import render_goal_images
 from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
 from wanderland_nav.episodes.paths import first_heading_nav, last_heading_nav, polyline_length, resample_polyline
@@ -33,6 +34,7 @@ from wanderland_nav.episodes.schema import (
     rotation_from_yaw,
     save_episodes,
 )
+from wanderland_nav.geometry import wrap_angle
 
 FORMAT_VERSION = 1
 HIST_EDGES = (0, 5, 10, 15, 20, 30, 50, 100, math.inf)  # metres, for the length histogram
@@ -181,7 +183,7 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     # phi radians counter-clockwise from the start heading (left > 0)
     d_nav = (pairs.goals - pairs.starts) @ R_ns.T if E else np.zeros((0, 3))
     rho = np.linalg.norm(d_nav[:, :2], axis=-1)
-    phi = (np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0 + np.pi) % (2 * np.pi) - np.pi
+    phi = wrap_angle(np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0)
 
     goal_paths: list[Path | None] = [None] * E
     if goal_image_dir is not None and settings.goal_images and E:
@@ -261,7 +263,7 @@ def args_hash(scene_name: str, num_episodes: int, seed: int, settings: Generator
               instruction_source: str, navmesh_hash: str) -> str:
     payload = {"format": FORMAT_VERSION, "scene": scene_name, "num_episodes": int(num_episodes), "seed": int(seed),
                "settings": settings.to_dict(), "instructions": instruction_source, "navmesh": navmesh_hash}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+    return json_digest(payload)
 
 
 def _up_to_date(out: Path, digest: str) -> list[Episode] | None:

@@ -18,6 +18,7 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 
 from wanderland_nav.episodes.schema import MIN_INSTRUCTION_WORDS
+from wanderland_nav.geometry import wrap_angle
 
 
 @dataclass
@@ -105,7 +106,7 @@ def route_legs(route: Route, *, simplify_tol: float = 0.75, min_turn_deg: float 
     d = np.diff(c, axis=0)  # [S, 3]
     horiz = np.linalg.norm(d[:, :2], axis=-1)
     yaw = np.arctan2(d[:, 1], d[:, 0])
-    turn = np.concatenate([[0.0], _wrap(np.diff(yaw))])  # [S] turn at the start of each segment
+    turn = np.concatenate([[0.0], wrap_angle(np.diff(yaw))])  # [S] turn at the start of each segment
     corner_s = np.concatenate([[0.0], np.cumsum(horiz)])  # arc length (horizontal) of each corner
     # raw legs: [first segment, last segment) split at large turns
     cuts = [0] + [i for i in range(1, len(d)) if abs(np.degrees(turn[i])) >= min_turn_deg] + [len(d)]
@@ -114,7 +115,7 @@ def route_legs(route: Route, *, simplify_tol: float = 0.75, min_turn_deg: float 
     merged: list[list] = []
     carry = 0.0
     for j, (a, b, t) in enumerate(raw):
-        t = _wrap(t + carry)
+        t = wrap_angle(t + carry)
         carry = 0.0
         if merged and horiz[a:b].sum() < min_leg and j < len(raw) - 1:
             carry = t
@@ -138,10 +139,6 @@ def route_legs(route: Route, *, simplify_tol: float = 0.75, min_turn_deg: float 
                 door = "enter" if flags[-1] else "exit"
         legs.append(Leg(length, float(t), dz, climb, door))
     return legs
-
-
-def _wrap(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 # --------------------------------------------------------------------------- wording

@@ -28,7 +28,7 @@ from tqdm.auto import tqdm
 
 from policies.base import NavPolicy
 from wanderland_nav import keys as K
-from wanderland_nav.geometry import world_to_body_2d
+from wanderland_nav.envs.experts import arc_lengths, pad_paths, waypoints_along_path
 from wanderland_nav.rl.loggers import Logger
 
 log = logging.getLogger(__name__)
@@ -38,19 +38,9 @@ class ExpertPaths:
     """Dense expert paths of E episodes, nav frame, padded: `xy [E, L, 2]`, arc length `s [E, L]`."""
 
     def __init__(self, paths_nav: Sequence[np.ndarray]):
-        if not len(paths_nav):
-            raise ValueError("ExpertPaths: no episodes")
-        lmax = max(len(p) for p in paths_nav)
-        xy = np.zeros((len(paths_nav), lmax, 2), np.float32)
-        for i, p in enumerate(paths_nav):
-            p = np.asarray(p, np.float32)
-            if p.ndim != 2 or p.shape[1] != 3 or len(p) < 1:
-                raise ValueError(f"ExpertPaths: episode {i} path must be [L>=1, 3], got {p.shape}")
-            xy[i, :len(p)] = p[:, :2]
-            xy[i, len(p):] = p[-1, :2]  # pad by repeating the goal: zero-length segments
-        self.xy = torch.from_numpy(xy)
-        seg = (self.xy[:, 1:] - self.xy[:, :-1]).norm(dim=-1)
-        self.s = torch.cat([torch.zeros(len(paths_nav), 1), seg.cumsum(1)], dim=1)  # [E, L]
+        xy = pad_paths(paths_nav, "ExpertPaths", dim=3)  # [E, L, 3] nav frame
+        self.xy = torch.from_numpy(xy[..., :2].astype(np.float32))  # [E, L, 2]
+        self.s = arc_lengths(self.xy)  # [E, L]
         self.length = self.s[:, -1]
 
     @classmethod
@@ -67,16 +57,8 @@ class ExpertPaths:
             raise IndexError(f"ExpertPaths: episode index {int(ep.max())} out of range ({len(self.xy)} paths)")
         xy, s = self.xy[ep], self.s[ep]                                  # [N, L, 2], [N, L]
         d = (xy - agent_xy[:, None, :2].float()).norm(dim=-1)           # [N, L]
-        s0 = s.gather(1, d.argmin(dim=1, keepdim=True))                 # [N, 1] arc length of the projection
-        steps = torch.arange(1, num_waypoints + 1, dtype=torch.float32) * spacing
-        tgt = torch.minimum(s0 + steps[None], self.length[ep][:, None])  # [N, K]
-        hi = torch.searchsorted(s.contiguous(), tgt.contiguous(), right=False).clamp(1, s.shape[1] - 1)
-        lo = hi - 1
-        s_lo, s_hi = s.gather(1, lo), s.gather(1, hi)
-        w = ((tgt - s_lo) / (s_hi - s_lo).clamp_min(1e-6)).clamp(0, 1)[..., None]
-        pts = xy.gather(1, lo[..., None].expand(-1, -1, 2)) * (1 - w) + xy.gather(1, hi[..., None].expand(-1, -1, 2)) * w
-        yaw = agent_yaw.view(-1).float()
-        return world_to_body_2d(pts, agent_xy[:, :2].float(), yaw)
+        s0 = s.gather(1, d.argmin(dim=1, keepdim=True))[:, 0]           # [N] arc length of the projection
+        return waypoints_along_path(xy, s, s0, agent_xy.float(), agent_yaw.float(), num_waypoints, spacing)
 
 
 class ExpertActor(TensorDictModuleBase):
@@ -110,7 +92,7 @@ class _MixedActor(TensorDictModuleBase):
     def __init__(self, expert: ExpertActor, learner: NavPolicy, beta: float, generator: torch.Generator):
         super().__init__()
         self.expert, self.learner, self.beta, self.generator = expert, learner, beta, generator
-        self.in_keys = sorted(set(expert.in_keys) | set(learner.in_keys))
+        self.in_keys = sorted(set(expert.in_keys) | set(learner.in_keys), key=str)
         self.out_keys = [K.ACTION]
 
     @torch.no_grad()
@@ -139,15 +121,15 @@ class BCConfig:
             raise ValueError(f"BCConfig: invalid sizes {self}")
 
 
-def _store_keys(policy: NavPolicy) -> list[str]:
-    return sorted(set(policy.in_keys) | {K.AGENT_POSITION, K.AGENT_YAW, K.EPISODE_INDEX, K.DISTANCE_TO_GOAL})
+def _store_keys(policy: NavPolicy) -> list:
+    return sorted(set(policy.in_keys) | {K.AGENT_POSITION, K.AGENT_YAW, K.EPISODE_INDEX, K.DISTANCE_TO_GOAL}, key=str)
 
 
 def collect(env: EnvBase, actor: TensorDictModuleBase, steps: int, keys: list[str]) -> TensorDict:
     """Roll `actor` for `steps` env steps (auto partial resets); keep root `keys`, flattened to `[N]`."""
     with torch.no_grad():
         roll = env.rollout(steps, actor, break_when_any_done=False, auto_reset=True)
-    present = [k for k in keys if k in roll.keys()]
+    present = [k for k in keys if k in roll.keys(True)]
     return roll.select(*present).reshape(-1).clone()
 
 

@@ -28,11 +28,12 @@ def shaped_env_config(env: dict[str, Any] | None, policy: NavPolicy, image_size:
     d = copy.deepcopy(dict(env or {}))
     d.setdefault("camera", {})
     d.setdefault("kinematics", {})
-    h, w = image_size if image_size is not None else policy.image_size
+    need = policy.config.env_requirements()  # the one declared "what the camera must deliver"
+    h, w = image_size if image_size is not None else need.image_size
     d["camera"]["height"], d["camera"]["width"] = int(h), int(w)
-    d["camera"]["history"] = max(int(d["camera"].get("history", 1)), policy.context)
-    d["kinematics"]["num_waypoints"] = policy.num_waypoints
-    d["kinematics"]["action_mode"] = "waypoints"
+    d["camera"]["history"] = max(int(d["camera"].get("history", 1)), need.history)
+    d["kinematics"]["num_waypoints"] = need.num_waypoints
+    d["kinematics"]["action_mode"] = need.action_mode
     return NavEnvConfig.from_dict(d, source="env config (+ policy shape)")
 
 

@@ -55,7 +55,6 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
-    freeze_encoder: bool = True        # the paper updates only the policy: image encoders stay fixed in RL
     critic_warmup_iters: int = 0       # first iterations update only the value head (see PPOTrainer.update)
 
     def __post_init__(self):
@@ -127,11 +126,11 @@ def episode_stats(batch: TensorDictBase) -> dict[str, float]:
     n = int(done.sum())
     out["train/episodes"] = n
     if n:
-        if K.SUCCESS in nxt.keys():
+        if K.SUCCESS in nxt.keys(True):
             out["train/SR"] = float(nxt.get(K.SUCCESS).squeeze(-1)[done].float().mean())
-        if K.INTERVENTION in nxt.keys():
+        if K.INTERVENTION in nxt.keys(True):
             out["train/IR"] = float(nxt.get(K.INTERVENTION).squeeze(-1)[done].float().mean())
-        if K.DISTANCE_TO_GOAL in nxt.keys():
+        if K.DISTANCE_TO_GOAL in nxt.keys(True):
             out["train/NE"] = float(nxt.get(K.DISTANCE_TO_GOAL).squeeze(-1)[done].mean())
     return out
 
@@ -145,7 +144,7 @@ class PPOTrainer:
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
-        if cfg.freeze_encoder:
+        if policy.config.freeze_encoder != "never":  # "rl" (the paper: update only the policy) or "always"
             policy.freeze_encoders(True)
         self.actor = make_actor(policy)
         self.critic = ValueModule(policy)

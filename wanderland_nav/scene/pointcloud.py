@@ -13,267 +13,31 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import plyfile
 
-from wanderland_nav.atomic import atomic_path
+from wanderland_nav.plyio import read_ply_data, write_ply_table
 
 
 class PointCloudFormatError(ValueError):
     """A point-cloud file is missing, truncated or malformed (message names file and property)."""
 
 
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-_NP_TO_PLY = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint",
-              "f4": "float", "f8": "double"}
+def read_ply(path) -> tuple[plyfile.PlyData, dict[str, dict[str, np.ndarray]]]:
+    """Read every element into `{element: {property: array[count]}}` (native byte order; a list
+    property is `[count, L]` when every list has the same length, else an object array).
+
+    Parsing is `plyfile`'s (`wanderland_nav.plyio`); errors are `PointCloudFormatError` naming the file,
+    element, row and property."""
+    data = read_ply_data(path, PointCloudFormatError)
+    out = {}
+    for el in data.elements:
+        table = el.data
+        out[el.name] = {n: _native(np.asarray(table[n])) for n in table.dtype.names}
+    return data, out
 
 
-@dataclass
-class PlyProperty:
-    name: str
-    dtype: str  # numpy kind+size, e.g. "f4"
-    list_count_dtype: str | None = None  # set for `property list <count> <item> name`
-
-
-@dataclass
-class PlyElement:
-    name: str
-    count: int
-    properties: list[PlyProperty]
-
-    @property
-    def has_list(self) -> bool:
-        return any(p.list_count_dtype for p in self.properties)
-
-
-@dataclass
-class PlyHeader:
-    fmt: str  # "ascii" | "binary_little_endian" | "binary_big_endian"
-    elements: list[PlyElement]
-    data_offset: int  # byte offset of the body
-    comments: list[str]
-
-
-def read_ply_header(path) -> PlyHeader:
-    path = Path(path)
-    if not path.is_file():
-        raise PointCloudFormatError(f"{path}: file not found")
-    with open(path, "rb") as f:
-        head = f.read(1 << 16)
-        end = head.find(b"end_header")
-        while end < 0:
-            more = f.read(1 << 16)
-            if not more or len(head) > (1 << 24):
-                raise PointCloudFormatError(f"{path}: no 'end_header' line (not a PLY file or truncated header)")
-            head += more
-            end = head.find(b"end_header")
-    nl = head.find(b"\n", end)
-    if nl < 0:
-        raise PointCloudFormatError(f"{path}: header is not terminated by a newline after end_header")
-    text = head[:end].decode("ascii", errors="replace").replace("\r", "")
-    lines = text.split("\n")
-    if not lines or lines[0].strip() != "ply":
-        raise PointCloudFormatError(f"{path}: missing 'ply' magic line")
-    fmt, elements, comments = None, [], []
-    for raw in lines[1:]:
-        tok = raw.split()
-        if not tok:
-            continue
-        if tok[0] == "format":
-            if len(tok) < 2 or tok[1] not in ("ascii", "binary_little_endian", "binary_big_endian"):
-                raise PointCloudFormatError(f"{path}: unsupported header field format {raw!r}")
-            fmt = tok[1]
-        elif tok[0] in ("comment", "obj_info"):
-            comments.append(raw[len(tok[0]):].strip())
-        elif tok[0] == "element":
-            try:
-                elements.append(PlyElement(tok[1], int(tok[2]), []))
-            except (IndexError, ValueError):
-                raise PointCloudFormatError(f"{path}: malformed header line {raw!r}") from None
-        elif tok[0] == "property":
-            if not elements:
-                raise PointCloudFormatError(f"{path}: property before any element: {raw!r}")
-            try:
-                if tok[1] == "list":
-                    elements[-1].properties.append(PlyProperty(tok[4], _PLY_TYPES[tok[3]], _PLY_TYPES[tok[2]]))
-                else:
-                    elements[-1].properties.append(PlyProperty(tok[2], _PLY_TYPES[tok[1]]))
-            except (IndexError, KeyError):
-                raise PointCloudFormatError(f"{path}: unsupported property line {raw!r}") from None
-    if fmt is None:
-        raise PointCloudFormatError(f"{path}: header has no 'format' line")
-    return PlyHeader(fmt, elements, nl + 1, comments)
-
-
-def _truncation_error(path, el: PlyElement, n_ok_bytes: int, stride: int, props: list[PlyProperty]):
-    row, within = divmod(max(n_ok_bytes, 0), stride)
-    acc = 0
-    prop = props[-1].name
-    for p in props:
-        acc += np.dtype(p.dtype).itemsize
-        if within < acc:
-            prop = p.name
-            break
-    return PointCloudFormatError(
-        f"{path}: truncated/corrupt data in element '{el.name}', property '{prop}' at row {row} "
-        f"(header declares {el.count} rows)")
-
-
-def read_ply(path) -> tuple[PlyHeader, dict[str, dict[str, np.ndarray]]]:
-    """Read every element into `{element: {property: array[count]}}` (list properties -> object
-    array unless every list has the same length, then a `[count, L]` array)."""
-    path = Path(path)
-    hdr = read_ply_header(path)
-    data = path.read_bytes()[hdr.data_offset:]
-    out: dict[str, dict[str, np.ndarray]] = {}
-    if hdr.fmt == "ascii":
-        _read_ascii_body(path, hdr, data, out)
-        return hdr, out
-    bo = "<" if hdr.fmt == "binary_little_endian" else ">"
-    off = 0
-    for el in hdr.elements:
-        if not el.has_list:
-            dt = np.dtype([(p.name, bo + p.dtype) for p in el.properties])
-            need = dt.itemsize * el.count
-            if off + need > len(data):
-                raise _truncation_error(path, el, len(data) - off, dt.itemsize, el.properties)
-            arr = np.frombuffer(data, dtype=dt, count=el.count, offset=off)
-            out[el.name] = {p.name: arr[p.name].astype(np.dtype(p.dtype)) for p in el.properties}
-            off += need
-        else:
-            off = _read_binary_list_element(path, el, data, off, bo, out)
-    if off < len(data) and data[off:].strip(b"\x00\r\n \t"):
-        # Trailing garbage usually means the header undercounts rows: refuse rather than guess.
-        raise PointCloudFormatError(f"{path}: {len(data) - off} unexpected bytes after the last element "
-                                    f"('{hdr.elements[-1].name}')")
-    return hdr, out
-
-
-def _read_binary_list_element(path, el: PlyElement, data: bytes, off: int, bo: str, out) -> int:
-    """List elements (faces) have variable-size rows. Fast path: all lists equal length (triangles)."""
-    res: dict[str, list] = {p.name: [] for p in el.properties}
-    # Try the uniform layout first: probe the first row's list length(s).
-    probe = off
-    layout = []
-    for p in el.properties:
-        if p.list_count_dtype:
-            cdt = np.dtype(bo + p.list_count_dtype)
-            if probe + cdt.itemsize > len(data):
-                if el.count == 0:
-                    break
-                raise _truncation_error(path, el, probe - off, 1, [p])
-            L = int(np.frombuffer(data, cdt, 1, probe)[0]) if el.count else 0
-            layout.append((p.name + "__count", bo + p.list_count_dtype))
-            layout.append((p.name, bo + p.dtype, (L,)))
-            probe += cdt.itemsize + np.dtype(p.dtype).itemsize * L
-        else:
-            layout.append((p.name, bo + p.dtype))
-            probe += np.dtype(p.dtype).itemsize
-    dt = np.dtype(layout) if layout else None
-    if dt is not None and off + dt.itemsize * el.count <= len(data):
-        arr = np.frombuffer(data, dtype=dt, count=el.count, offset=off)
-        ok = all((arr[p.name + "__count"] == arr.dtype[p.name].shape[0]).all()
-                 for p in el.properties if p.list_count_dtype)
-        if ok:
-            out[el.name] = {p.name: np.array(arr[p.name]).astype(np.dtype(p.dtype)) for p in el.properties}
-            return off + dt.itemsize * el.count
-    # Variable-length lists: sequential scan (rare for the files we read: polygons other than triangles).
-    for row in range(el.count):
-        for p in el.properties:
-            if p.list_count_dtype:
-                cdt = np.dtype(bo + p.list_count_dtype)
-                if off + cdt.itemsize > len(data):
-                    raise PointCloudFormatError(f"{path}: truncated data in element '{el.name}', property "
-                                                f"'{p.name}' (list count) at row {row}")
-                L = int(np.frombuffer(data, cdt, 1, off)[0])
-                off += cdt.itemsize
-                idt = np.dtype(bo + p.dtype)
-                if off + idt.itemsize * L > len(data):
-                    raise PointCloudFormatError(f"{path}: truncated data in element '{el.name}', property "
-                                                f"'{p.name}' at row {row}")
-                res[p.name].append(np.frombuffer(data, idt, L, off).astype(np.dtype(p.dtype)))
-                off += idt.itemsize * L
-            else:
-                idt = np.dtype(bo + p.dtype)
-                if off + idt.itemsize > len(data):
-                    raise PointCloudFormatError(f"{path}: truncated data in element '{el.name}', property "
-                                                f"'{p.name}' at row {row}")
-                res[p.name].append(np.frombuffer(data, idt, 1, off)[0])
-                off += idt.itemsize
-    out[el.name] = {k: _maybe_stack(v) for k, v in res.items()}
-    return off
-
-
-def _maybe_stack(vals: list):
-    if vals and isinstance(vals[0], np.ndarray):
-        if len({v.shape for v in vals}) == 1:
-            return np.stack(vals)
-        o = np.empty(len(vals), dtype=object)
-        o[:] = vals
-        return o
-    return np.asarray(vals)
-
-
-def _read_ascii_body(path, hdr: PlyHeader, data: bytes, out) -> None:
-    lines = data.decode("ascii", errors="replace").splitlines()
-    pos = 0
-    for el in hdr.elements:
-        rows = lines[pos:pos + el.count]
-        if len(rows) < el.count:
-            raise PointCloudFormatError(
-                f"{path}: truncated ascii data in element '{el.name}', property '{el.properties[0].name}' "
-                f"at row {len(rows)} (header declares {el.count} rows)")
-        pos += el.count
-        if not el.has_list:
-            nprop = len(el.properties)
-            try:
-                tok = " ".join(rows).split()
-                vals = np.asarray(tok, dtype=np.float64)
-            except ValueError:
-                vals = None
-            if vals is None or vals.size != nprop * el.count:
-                # locate the offending row/property for the message
-                for r, line in enumerate(rows):
-                    t = line.split()
-                    for j, p in enumerate(el.properties):
-                        if j >= len(t):
-                            raise PointCloudFormatError(f"{path}: ascii element '{el.name}' row {r}: "
-                                                        f"missing property '{p.name}'")
-                        try:
-                            float(t[j])
-                        except ValueError:
-                            raise PointCloudFormatError(f"{path}: ascii element '{el.name}' row {r}: property "
-                                                        f"'{p.name}' is not a number: {t[j]!r}") from None
-                    if len(t) > nprop:
-                        raise PointCloudFormatError(f"{path}: ascii element '{el.name}' row {r}: {len(t)} values, "
-                                                    f"header declares {nprop} properties")
-                raise PointCloudFormatError(f"{path}: corrupt ascii element '{el.name}'")
-            vals = vals.reshape(el.count, nprop)
-            out[el.name] = {p.name: vals[:, j].astype(np.dtype(p.dtype)) for j, p in enumerate(el.properties)}
-        else:
-            res: dict[str, list] = {p.name: [] for p in el.properties}
-            for r, line in enumerate(rows):
-                t = line.split()
-                k = 0
-                try:
-                    for p in el.properties:
-                        if p.list_count_dtype:
-                            L = int(t[k])
-                            k += 1
-                            if k + L > len(t):
-                                raise IndexError
-                            res[p.name].append(np.asarray(t[k:k + L], dtype=np.float64).astype(np.dtype(p.dtype)))
-                            k += L
-                        else:
-                            res[p.name].append(np.dtype(p.dtype).type(float(t[k])))
-                            k += 1
-                except (IndexError, ValueError):
-                    raise PointCloudFormatError(f"{path}: ascii element '{el.name}' row {r}: property "
-                                                f"'{p.name}' missing or not a number") from None
-            out[el.name] = {k2: _maybe_stack(v) for k2, v in res.items()}
+def _native(a: np.ndarray) -> np.ndarray:
+    return a if a.dtype.kind == "O" or a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
 
 
 # --------------------------------------------------------------------------- point clouds
@@ -291,6 +55,7 @@ class PointCloud:
         return int(self.xyz.shape[0])
 
 
+_PLY_SCALARS = {"i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8"}  # numpy types a PLY property can hold
 _COLOR_NAMES = (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
 
 
@@ -344,36 +109,20 @@ def write_ply_points(path, xyz, rgb=None, *, binary: bool = True, extra: dict[st
         a = np.asarray(a)
         if a.shape != (n,):
             raise ValueError(f"extra property '{k}' must be [{n}], got {a.shape}")
-        if a.dtype.str[1:] not in _NP_TO_PLY:
-            a = a.astype(np.float32)
+        if a.dtype.str[1:] not in _PLY_SCALARS:
+            a = a.astype(np.float32)  # no PLY scalar type (bool, int64, float16, ...): store as float
         cols.append((k, a))
     write_ply_element(path, "vertex", cols, binary=binary, comments=comments)
 
 
 def write_ply_element(path, element: str, cols: list[tuple[str, np.ndarray]], *, binary: bool = True,
-                      comments: tuple[str, ...] = (), extra_elements_bytes: tuple = ()) -> None:
-    """Write one scalar-property element (columns in order) as PLY, atomically."""
+                      comments: tuple[str, ...] = ()) -> None:
+    """Write one scalar-property element (columns in order) as PLY (little-endian or ascii), atomically."""
     n = cols[0][1].shape[0] if cols else 0
-    fmt = "binary_little_endian" if binary else "ascii"
-    head = ["ply", f"format {fmt} 1.0", *[f"comment {c}" for c in comments], f"element {element} {n}"]
+    rec = np.empty(n, dtype=[(name, "<" + np.asarray(a).dtype.str[1:]) for name, a in cols])
     for name, a in cols:
-        head.append(f"property {_NP_TO_PLY[np.asarray(a).dtype.str[1:]]} {name}")
-    head.append("end_header")
-    header = ("\n".join(head) + "\n").encode("ascii")
-    if binary:
-        dt = np.dtype([(name, "<" + np.asarray(a).dtype.str[1:]) for name, a in cols])
-        rec = np.empty(n, dtype=dt)
-        for name, a in cols:
-            rec[name] = a
-        body = rec.tobytes()
-    else:
-        parts = []
-        for name, a in cols:
-            a = np.asarray(a)
-            parts.append(a.astype(str) if a.dtype.kind in "iu" else np.char.mod("%.9g", a.astype(np.float64)))
-        body = ("\n".join(" ".join(r) for r in zip(*parts)) + ("\n" if n else "")).encode("ascii")
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(header + body)
+        rec[name] = a
+    write_ply_table(path, rec, element, binary=binary, comments=comments)
 
 
 # --------------------------------------------------------------------------- KITTI

@@ -28,7 +28,7 @@ import numpy as np
 import rerun as rr
 import torch
 
-from wanderland_nav.geometry import agent_camera_poses
+from wanderland_nav.geometry import agent_camera_poses, yaw_rotation
 from wanderland_nav.rollouts import Rollout
 from wanderland_nav.viz.rerun_episodes import entity_name
 from wanderland_nav.viz.rerun_scene import view_coordinates
@@ -43,10 +43,7 @@ def body_poses_scene(position_nav: np.ndarray, yaw: np.ndarray, nav_from_scene: 
     body = nav frame rotated by yaw about +z at the feet; scene = R_sn @ nav with R_sn = nav_from_scene^T.
     """
     R_sn = np.asarray(nav_from_scene, np.float64).T
-    c, s = np.cos(yaw), np.sin(yaw)
-    z, o = np.zeros_like(yaw), np.ones_like(yaw)
-    nav_from_body = np.stack([c, -s, z, s, c, z, z, z, o], -1).reshape(*np.shape(yaw), 3, 3)
-    return position_nav @ R_sn.T, R_sn @ nav_from_body
+    return position_nav @ R_sn.T, R_sn @ yaw_rotation(np.asarray(yaw))
 
 
 def body_from_camera(mount_height: float, pitch_deg: float) -> np.ndarray:

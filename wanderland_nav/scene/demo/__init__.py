@@ -14,8 +14,6 @@ preset give byte-identical files.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import shutil
 import time
@@ -25,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json, atomic_write_text
+from wanderland_nav.cache import json_digest, read_record
 from wanderland_nav.geometry import nav_from_scene_rotation
 
 from . import capture, lidar, splats, views
@@ -68,9 +67,8 @@ def scene_from_nav() -> np.ndarray:
 
 
 def _args_hash(seed: int, preset: str) -> str:
-    blob = json.dumps({"seed": seed, "preset": preset, "settings": asdict(PRESETS[preset]),
-                       "version": GENERATOR_VERSION}, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+    return json_digest({"seed": seed, "preset": preset, "settings": asdict(PRESETS[preset]),
+                        "version": GENERATOR_VERSION})
 
 
 def make_demo_scene(out_dir, seed: int = 0, preset: str = "default", *, timings: dict | None = None) -> Path:
@@ -88,11 +86,8 @@ def make_demo_scene(out_dir, seed: int = 0, preset: str = "default", *, timings:
     key = _args_hash(seed, preset)
     marker = out / MARKER
     if marker.is_file():
-        try:
-            if json.loads(marker.read_text()).get("args_hash") == key:
-                return out
-        except (OSError, ValueError):
-            pass
+        if (read_record(marker) or {}).get("args_hash") == key:
+            return out
     elif out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise FileExistsError(f"{out}: exists and is not a demo scene (no {MARKER}); refusing to overwrite it")
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wanderland_nav.geometry import pinhole_intrinsics
+
 from .layout import walk_height
 
 
@@ -140,5 +142,4 @@ def stereo_cameras(rig: Rig, baseline: float = BASELINE):
 
 def intrinsics(size: int, hfov_deg: float = 90.0) -> np.ndarray:
     """Square pinhole `K [3, 3]` (Wanderland's undistorted views are square, 90 deg)."""
-    f = 0.5 * size / np.tan(0.5 * np.deg2rad(hfov_deg))
-    return np.array([[f, 0.0, 0.5 * size], [0.0, f, 0.5 * size], [0.0, 0.0, 1.0]])
+    return pinhole_intrinsics(size, size, hfov_deg)

@@ -1,0 +1,36 @@
+"""Hash-and-skip caching: a digest of everything that determines an artefact, stored beside it.
+
+Scene preparation (collision mesh, navmesh sidecars), the demo scene (its marker file) and episode
+generation (the episodes file's `generator` record) each rebuild only when the digest of their inputs
+changed. They share the digest and the tolerant read of the stored record, so "same settings" means
+the same thing everywhere: canonical JSON (sorted keys, `str()` for anything JSON cannot hold),
+sha256, the first 16 hex digits.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+
+def json_digest(obj) -> str:
+    """16 hex digits of sha256 over `obj` as canonical JSON (sorted keys; non-JSON values via `str`)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def read_record(path: str | os.PathLike) -> dict | None:
+    """The JSON object stored at `path`, or None when it is missing, unreadable or not an object.
+
+    A cache record that cannot be read means "rebuild", never an error: the artefact is rewritten
+    together with a fresh record.
+    """
+    p = Path(path)
+    if not p.is_file():
+        return None
+    try:
+        obj = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+    return obj if isinstance(obj, dict) else None
