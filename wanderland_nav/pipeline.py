@@ -17,10 +17,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
-from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
+from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh, load_collision_mesh
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.model import Scene
 
@@ -59,14 +59,23 @@ def scene_inputs(root: Path) -> list[Path]:
     return sorted(p for p in cands if p.is_file())
 
 
-def _up_to_date(output: Path, inputs: list[Path], settings_hash: str) -> bool:
+def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> bool:
+    """Output exists, its sidecar's hash matches, it is newer than every input, and `load(output)` reads it:
+    a truncated artefact (killed copy, full disk) is rebuilt, never called up to date."""
     if not output.is_file():
         return False
     side = _read_sidecar(output)
     if side is None or side.get("settings_hash") != settings_hash:
         return False
     t_out = output.stat().st_mtime
-    return all(p.stat().st_mtime <= t_out for p in inputs)
+    if not all(p.stat().st_mtime <= t_out for p in inputs):
+        return False
+    try:
+        load(output)
+    except ValueError as e:  # WanderlandInputError / NavMeshFileError: both name the file
+        log.warning("%s: cached artefact does not load (%s); rebuilding it", output, e)
+        return False
+    return True
 
 
 def capture_positions(scene: Scene) -> np.ndarray:
@@ -86,11 +95,16 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
     out = scene.root / COLLISION_MESH
     inputs = scene_inputs(scene.root)
     h = _hash({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
-    if not force and _up_to_date(out, inputs, h):
+    if not force and _up_to_date(out, inputs, h, load_collision_mesh):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
         return out, side
+    if not np.isfinite(scene.points).all(-1).any():  # empty, or nothing finite
+        raise WanderlandInputError(f"scene {scene.name!r} has no finite points among {len(scene.points)}: the "
+                                   f"collision mesh needs a point cloud "
+                                   f"(raw_pcd.ply, points3D or lidar/ scans; inputs found: "
+                                   f"{[p.name for p in inputs]})", path=scene.root)
     t0 = time.perf_counter()
     mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
     meta = mesh.metadata.pop("collision")
@@ -118,13 +132,13 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     out = scene.root / NAVMESH
     cm_side = _read_sidecar(cm) or {}
     h = _hash({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
-    if not force and _up_to_date(out, [cm], h):
+    if not force and _up_to_date(out, [cm], h, NavMesh.load):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
         return out, side
     t0 = time.perf_counter()
-    mesh = trimesh.load(cm, file_type="ply", process=False, force="mesh")
+    mesh = load_collision_mesh(cm)
     nm = NavMesh.bake(mesh, settings)
     t_bake = time.perf_counter() - t0
     nm.save(out)  # NavMesh.save writes atomically

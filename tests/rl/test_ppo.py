@@ -120,3 +120,36 @@ def test_critic_warmup_leaves_the_policy_alone(tmp_path):
     after = p.state_dict()
     changed = {k for k in before if not torch.equal(before[k], after[k])}
     assert changed and all(k.startswith("value_head.") for k in changed), changed
+
+
+class NaNRewardEnv(FakeNavEnv):
+    """FakeNavEnv whose rewards turn NaN after `clean_steps` env steps (a reward bug, a broken sensor)."""
+
+    def __init__(self, *a, clean_steps: int = 8, **kw):
+        super().__init__(*a, **kw)
+        self.clean_steps, self.calls = clean_steps, 0
+
+    def _step(self, td):
+        out = super()._step(td)
+        self.calls += 1
+        if self.calls > self.clean_steps:
+            out.set(K.REWARD, torch.full_like(out.get(K.REWARD), float("nan")))
+        return out
+
+
+def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint(tmp_path):
+    from wanderland_nav.rl.ppo import NonFiniteLossError
+
+    p = tiny_policy()
+    cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4)
+    ck = Checkpointer(tmp_path / "ckpt")
+    t = PPOTrainer(p, lambda: NaNRewardEnv((4,)), cfg, logger=ListLogger(), checkpointer=ck, progress=False)
+    with pytest.raises(NonFiniteLossError, match=r"PPO diverged at iteration 2 \(epoch 0, minibatch 0\): "
+                                                 r"non-finite loss_objective=nan, loss_critic=nan.*last\.pt "
+                                                 r"\(iteration 1\) is intact"):
+        t.train()
+    good = ck.resume()
+    assert good["counters"]["ppo_iteration"] == 1
+    for k, v in p.state_dict().items():  # the optimiser never stepped on the NaN loss
+        assert torch.isfinite(v.float()).all(), k
+        torch.testing.assert_close(v, good["policy"][k])

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError
 
 # PLY scalar type name -> numpy type code (byte order added per file)
 _PLY_TYPES = {
@@ -31,7 +32,7 @@ _NP_TO_PLY = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": 
 _MAX_HEADER = 1 << 20  # a header longer than 1 MiB is not a PLY we can read
 
 
-class PlyError(ValueError):
+class PlyError(WanderlandInputError):
     """A PLY file that cannot be read as a binary vertex table; the message names the file."""
 
 

@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError
 
 
-class ColmapFormatError(ValueError):
+class ColmapFormatError(WanderlandInputError):
     """A COLMAP file is missing, truncated or malformed (message names file and field)."""
 
 

@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError
 
 
-class PointCloudFormatError(ValueError):
+class PointCloudFormatError(WanderlandInputError):
     """A point-cloud file is missing, truncated or malformed (message names file and property)."""
 
 
