@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from policies import make_policy
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights, save_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger, Logger, make_logger
 from wanderland_nav.rl.report import comparison_table, relative_change
@@ -27,7 +28,7 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     with pytest.raises(ValueError, match="c.pt.*MBRAPolicy"):
         load_policy_weights(make_policy("mbra", dim=16, depth=1, heads=2), path)
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(Exception):
+    with pytest.raises(WanderlandInputError, match=r"junk\.pt: not a readable checkpoint \(truncated or corrupt"):
         load_checkpoint(tmp_path / "junk.pt")
     torch.save({"foo": 1}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="other.pt"):
