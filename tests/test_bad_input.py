@@ -104,6 +104,8 @@ def test_truncated_collision_mesh_names_file(tmp_path):
     from wanderland_nav.scene.collision import load_collision_mesh
 
     path = tmp_path / "collision_mesh.ply"
+    with pytest.raises(FileNotFoundError, match=re.escape(f"collision mesh not found: {path}")):
+        load_collision_mesh(path)
     _floor().export(path)
     assert len(load_collision_mesh(path).faces) == 12
     _truncate(path, 0.9)

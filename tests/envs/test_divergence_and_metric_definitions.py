@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import math
 
+import numpy as np
 import pytest
 import torch
 from env_fakes import FakeField, FakeNavMesh, FakeRenderer, FakeScene, make_episode
@@ -111,3 +112,14 @@ def test_report_table_has_both_distances():
     lines = comparison_table(rows, "BC").splitlines()
     assert lines[0].split() == ["policy", "episodes", "NE", "distance_to_goal", "SR", "SPL", "IR"]
     assert lines[2].split()[2:6] == ["0.50", "(+50%)", "1.50", "(+50%)"]  # both in metres, lower is better
+
+
+def test_goal_off_the_mesh_is_named():
+    """README "Bad input": a goal far from the navmesh names the file, the episode and the field (starts were
+    already checked; goals were not, and a real navmesh then failed inside the distance field)."""
+    from env_fakes import make_env
+
+    far = make_episode(9, (1, 1), (4, 1))
+    far.goals[0].position = far.goals[0].position + np.array([0.0, 5.0, 0.0])  # scene +y is down: 5 m under
+    with pytest.raises(ValueError, match=r"episodes\[0\] \(id 9\)\.goals\[0\]\.position lies 5\.00 m from the navmesh"):
+        make_env(B=1, episodes=[far])
