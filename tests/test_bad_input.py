@@ -150,6 +150,15 @@ def test_prepare_rebuilds_a_truncated_artefact_instead_of_calling_it_up_to_date(
     NavMesh.load(demo_copy / "navmesh.npz")  # readable again
     third = prepare_scene(demo_copy, **fast)
     assert third.meta["prepare"]["navmesh"]["skipped"] is True
+    # a sidecar from before the sha256 field: the artefact is verified by loading it instead
+    side_path = demo_copy / "navmesh.json"
+    side = json.loads(side_path.read_text())
+    side.pop("sha256")
+    side_path.write_text(json.dumps(side))
+    assert prepare_scene(demo_copy, **fast).meta["prepare"]["navmesh"]["skipped"] is True
+    side_path.write_text(json.dumps(side))
+    _truncate(demo_copy / "navmesh.npz", 0.6)
+    assert prepare_scene(demo_copy, **fast).meta["prepare"]["navmesh"]["skipped"] is False
 
 
 def test_empty_point_cloud_names_scene(demo_copy):

@@ -59,9 +59,15 @@ def scene_inputs(root: Path) -> list[Path]:
     return sorted(p for p in cands if p.is_file())
 
 
+def _file_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
 def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> bool:
-    """Output exists, its sidecar's hash matches, it is newer than every input, and `load(output)` reads it:
-    a truncated artefact (killed copy, full disk) is rebuilt, never called up to date."""
+    """Output exists, its sidecar's settings hash matches, it is newer than every input, and it is intact:
+    its bytes hash to the sidecar's `sha256` (a few ms), or, for sidecars written before that field,
+    `load(output)` reads it. A truncated or corrupt artefact (killed copy, full disk) is rebuilt,
+    never called up to date."""
     if not output.is_file():
         return False
     side = _read_sidecar(output)
@@ -69,6 +75,11 @@ def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> b
         return False
     t_out = output.stat().st_mtime
     if not all(p.stat().st_mtime <= t_out for p in inputs):
+        return False
+    if "sha256" in side:
+        if side["sha256"] == _file_digest(output):
+            return True
+        log.warning("%s: content does not match its sidecar (truncated or modified); rebuilding it", output)
         return False
     try:
         load(output)
@@ -110,7 +121,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
     meta = mesh.metadata.pop("collision")
     with atomic_path(out) as tmp:
         mesh.export(tmp, file_type="ply")
-    side = {"settings_hash": h, "settings": settings.as_dict(), "up_axis": scene.up_axis,
+    side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.as_dict(), "up_axis": scene.up_axis,
             "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
@@ -143,7 +154,8 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     t_bake = time.perf_counter() - t0
     nm.save(out)  # NavMesh.save writes atomically
     islands = _island_summary(nm)
-    side = {"settings_hash": h, "settings": settings.to_dict(), "collision_settings_hash": cm_side.get("settings_hash"),
+    side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.to_dict(),
+            "collision_settings_hash": cm_side.get("settings_hash"),
             "islands": islands, "num_islands": len(islands), "area_m2": float(sum(i["area"] for i in islands)),
             "timings": {"bake_s": t_bake, "total_s": time.perf_counter() - t0}, "skipped": False}
     atomic_write_json(_sidecar(out), side)
