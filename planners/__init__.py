@@ -10,4 +10,6 @@ from planners.navmesh import IslandInfo, NavMesh
 from planners.path import PathResult
 from planners.settings import NavMeshFileError, NavMeshSettings, OffMeshError
 
-__all__ = ["NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "NavMeshFileError", "GeodesicField", "IslandInfo"]
+__all__ = [
+    "NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "NavMeshFileError", "GeodesicField", "IslandInfo",
+]

@@ -34,6 +34,11 @@ class WanderlandInputError(ValueError):
         self.field = field
 
 
+class NonFiniteLossError(RuntimeError):
+    """Training diverged: a loss term or gradient norm became NaN/inf. The message names where (iteration,
+    epoch, minibatch or round/update) and which term; raised before the optimiser steps on it."""
+
+
 def torch_load(path: str | os.PathLike, *, what: str, weights_only: bool, map_location: Any = "cpu") -> Any:
     """`torch.load` that names the file: missing -> FileNotFoundError, truncated/corrupt -> WanderlandInputError.
 

@@ -101,7 +101,8 @@ def test_ne_is_euclidean_distance_to_goal_is_geodesic_and_spl_lengths_are_horizo
     assert m.path_length == pytest.approx(2.0, abs=1e-5)                # horizontal: 4 x 0.5 m, not 4 x 0.50062
     assert m.shortest_length == pytest.approx(2 * math.hypot(8.0, 0.4), rel=1e-5)
     row = aggregate_metrics([m])["overall"]
-    assert row["NE"] == pytest.approx(euclid, rel=1e-5) and row["distance_to_goal"] == pytest.approx(2 * euclid, rel=1e-5)
+    assert row["NE"] == pytest.approx(euclid, rel=1e-5)
+    assert row["distance_to_goal"] == pytest.approx(2 * euclid, rel=1e-5)
 
 
 def test_report_table_has_both_distances():
@@ -121,5 +122,6 @@ def test_goal_off_the_mesh_is_named():
 
     far = make_episode(9, (1, 1), (4, 1))
     far.goals[0].position = far.goals[0].position + np.array([0.0, 5.0, 0.0])  # scene +y is down: 5 m under
-    with pytest.raises(ValueError, match=r"episodes\[0\] \(id 9\)\.goals\[0\]\.position lies 5\.00 m from the navmesh"):
+    with pytest.raises(ValueError,
+                       match=r"episodes\[0\] \(id 9\)\.goals\[0\]\.position lies 5\.00 m from the navmesh"):
         make_env(B=1, episodes=[far])

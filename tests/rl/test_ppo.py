@@ -172,7 +172,7 @@ class NaNRewardEnv(FakeNavEnv):
 
 
 def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint(tmp_path):
-    from wanderland_nav.rl.ppo import NonFiniteLossError
+    from wanderland_nav.errors import NonFiniteLossError
 
     p = tiny_policy()
     cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4)

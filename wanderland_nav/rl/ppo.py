@@ -33,14 +33,11 @@ from tqdm.auto import tqdm
 
 from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
+from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.loggers import Logger
 
 log = logging.getLogger(__name__)
-
-
-class NonFiniteLossError(RuntimeError):
-    """A PPO loss term or gradient norm became NaN/inf; the message names the iteration and the term."""
 
 
 @dataclass
