@@ -81,3 +81,21 @@ def test_distortion_survives_downscaling(tmp_path):
     ideal_half = torch.nn.functional.avg_pool2d(ideal.permute(2, 0, 1)[None], 2)[0].permute(1, 2, 0)
     m = half.mask[..., 0]
     assert float((half.image - ideal_half).abs().max(-1).values[m].mean()) < 0.012
+
+
+def test_colmap_distortion_terms_reach_the_camera_in_order(caplog):
+    """FULL_OPENCV is radial-tangential: (k1, k2, p1, p2) must reach `Camera.distortion` in that order (it
+    used to carry k1, k2, k3, k4, which the pinhole undistortion would read as p1, p2); terms no model here
+    represents are named in a warning, not dropped silently."""
+    from wanderland_nav.scene import colmap as C
+
+    params = [500, 510, 320, 240, -0.2, 0.05, 0.001, -0.002, 0.0, 0.0, 0.0, 0.0]
+    _, d = C.ColmapCamera(1, "FULL_OPENCV", 640, 480, np.array(params, float)).intrinsics()
+    assert d.tolist() == [-0.2, 0.05, 0.001, -0.002] and not caplog.records
+    params[8] = 0.01  # k3
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.scene.colmap"):
+        C.ColmapCamera(2, "FULL_OPENCV", 640, 480, np.array(params, float)).intrinsics()
+        _, d = C.ColmapCamera(3, "FOV", 640, 480, np.array([500, 500, 320, 240, 0.9])).intrinsics()
+    msgs = [r.getMessage() for r in caplog.records]
+    assert "COLMAP camera 2 (FULL_OPENCV): distortion terms ['k3'] are not modelled" in msgs[0]
+    assert "COLMAP camera 3 (FOV): distortion terms ['omega'] are not modelled" in msgs[1] and not d.any()
