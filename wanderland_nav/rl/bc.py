@@ -179,8 +179,8 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
             mb = data[idx]
             loss, metrics = policy.bc_loss(mb.exclude("_label"), mb.get("_label"))
             if not bool(torch.isfinite(loss)):  # stop before the optimiser writes NaN into the weights
-                raise NonFiniteLossError(f"BC diverged at round {r} (update {step - step_offset + 1} of the run): loss={float(loss.detach())}; "
-                                         f"the policy weights are those of the previous update")
+                raise NonFiniteLossError(f"BC diverged at round {r} (update {step - step_offset + 1} of the run): "
+                                         f"loss={float(loss.detach())}; the weights are those of the previous update")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(policy.trainable_parameters(), cfg.max_grad_norm)
