@@ -16,6 +16,8 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +26,7 @@ import torch
 
 from planners.heightfield import build_compact
 from planners.polygons import build_trimesh
-from planners.settings import FORMAT_VERSION, NavMeshSettings, OffMeshError
+from planners.settings import FORMAT_VERSION, NavMeshFileError, NavMeshSettings, OffMeshError
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
 from planners.walk import closest_point_on_tris, point_in_tri
 from wanderland_nav.atomic import atomic_path
@@ -120,7 +122,7 @@ class NavMesh:
         if path.is_file():
             try:
                 return cls.load(path)
-            except (ValueError, OSError, KeyError):
+            except (NavMeshFileError, ValueError, OSError, KeyError):
                 pass  # stale or corrupt cache entry: rebake and overwrite
         nm = cls.bake(mesh, settings)
         nm.save(path)
@@ -137,19 +139,28 @@ class NavMesh:
 
     @classmethod
     def load(cls, path: str | Path) -> "NavMesh":
+        """Read a `save`d navmesh; a truncated or corrupt file raises `NavMeshFileError` naming it."""
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: navmesh file not found")
-        with np.load(path, allow_pickle=False) as z:
-            if "meta" not in z.files:
-                raise ValueError(f"{path}: field 'meta' missing (not a navmesh .npz)")
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format_version") != FORMAT_VERSION:
-                raise ValueError(f"{path}: field 'format_version' is {meta.get('format_version')}, expected {FORMAT_VERSION}")
-            missing = [k for k in _ARRAYS if k not in z.files]
-            if missing:
-                raise ValueError(f"{path}: fields {missing} missing")
-            arrays = {k: z[k] for k in _ARRAYS}
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if "meta" not in z.files:
+                    raise NavMeshFileError(path, "field 'meta' missing (not a navmesh .npz)")
+                meta = json.loads(str(z["meta"]))
+                if meta.get("format_version") != FORMAT_VERSION:
+                    raise NavMeshFileError(path, f"field 'format_version' is {meta.get('format_version')}, "
+                                                 f"expected {FORMAT_VERSION}")
+                missing = [k for k in _ARRAYS if k not in z.files]
+                if missing:
+                    raise NavMeshFileError(path, f"fields {missing} missing")
+                arrays = {k: z[k] for k in _ARRAYS}
+        except NavMeshFileError:
+            raise
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as e:
+            # np.load / zipfile messages ("File is not a zip file") name no file
+            raise NavMeshFileError(path, f"not a readable navmesh .npz (truncated or corrupt: {e}); "
+                                         f"delete it and run prepare again") from e
         settings = NavMeshSettings.from_dict(meta["settings"], source=f"{path}: field 'settings'")
         return cls(settings, meta["width"], meta["height"], source_hash=meta.get("source_hash", ""),
                    bake_seconds=meta.get("bake_seconds", 0.0), **arrays)

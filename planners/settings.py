@@ -11,6 +11,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from wanderland_nav.geometry import parse_up_axis
 
@@ -22,6 +23,18 @@ FORMAT_VERSION = 2
 
 class OffMeshError(ValueError):
     """A query point lies farther from the navmesh than the allowed snap distance."""
+
+
+class NavMeshFileError(ValueError):
+    """A `navmesh.npz` that cannot be read (truncated, corrupt, another format version); `.path` names it.
+
+    `planners` may not import `wanderland_nav`, so this is its own counterpart of
+    `wanderland_nav.errors.WanderlandInputError` (both are `ValueError`s naming the file).
+    """
+
+    def __init__(self, path, problem: str):
+        super().__init__(f"{path}: {problem}")
+        self.path = Path(path)
 
 
 @dataclass(frozen=True)

@@ -32,3 +32,41 @@ def test_atomic_json_refuses_nan(tmp_path):
     with pytest.raises(ValueError):
         atomic_write_json(tmp_path / "x.json", {"a": float("nan")})
     assert not (tmp_path / "x.json").exists()
+
+
+def test_disk_full_mid_write_leaves_the_old_file(tmp_path, monkeypatch):
+    """A writer that fails part-way (ENOSPC) must not touch the old file nor leave a temporary behind."""
+    import errno
+
+    target = tmp_path / "episodes.json"
+    atomic_write_json(target, {"episodes": [1, 2, 3]})
+    real_write = os.write
+
+    def full_disk_write(fd, data):
+        real_write(fd, data[: len(data) // 2])  # half the bytes land, then the disk is full
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "write", full_disk_write)
+    with pytest.raises(OSError, match="No space left on device"):
+        with atomic_path(target) as tmp:
+            fd = os.open(tmp, os.O_WRONLY)
+            try:
+                os.write(fd, b'{"episodes": []}' * 100)
+            finally:
+                os.close(fd)
+    monkeypatch.undo()
+    assert json.loads(target.read_text()) == {"episodes": [1, 2, 3]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.json"]
+
+
+def test_file_and_folder_are_fsynced_around_the_rename(tmp_path, monkeypatch):
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(os, "fsync", lambda fd: (events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}"))),
+                                                 real_fsync(fd)))
+    monkeypatch.setattr(os, "replace", lambda a, b: (events.append(("replace", str(b))), real_replace(a, b)))
+    atomic_write_json(tmp_path / "x.json", {"a": 1})
+    kinds = [e[0] for e in events]
+    assert kinds == ["fsync", "replace", "fsync"], events
+    assert events[0][1].startswith(str(tmp_path / ".x.")) and events[0][1].endswith(".tmp.json")  # the data
+    assert events[2][1] == str(tmp_path)  # the folder holding the new name

@@ -3,6 +3,12 @@
 Every file the framework produces (scenes, meshes, navmeshes, episodes, checkpoints,
 rollouts) goes through `atomic_path`: the writer gets a temporary path in the same folder
 and the result is renamed over the target only once the writer returned without error.
+
+Durability: the temporary file is `fsync`ed before the rename and the folder after it, so a
+power cut right after a save leaves either the old file or the complete new one, never a
+renamed-but-empty file (ext4/xfs may otherwise commit the rename before the data). A writer
+that fails part-way (a full disk raises `OSError: [Errno 28] No space left on device`) leaves
+the old file untouched and no temporary behind.
 """
 
 from __future__ import annotations
@@ -35,10 +41,26 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
         os.umask(umask)
         if tmp_path.exists():
             os.chmod(tmp_path, 0o666 & ~umask)
+            _fsync_path(tmp_path, os.O_RDONLY)
         os.replace(tmp_path, target)
+        _fsync_path(target.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _fsync_path(path: Path, flags: int) -> None:
+    """Flush a file's data, or a folder's entries, to disk. Folders cannot be opened on Windows: skipped there."""
+    try:
+        fd = os.open(path, flags)
+    except (IsADirectoryError, PermissionError):
+        if os.name == "nt":
+            return
+        raise
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def atomic_write_bytes(target: str | os.PathLike, data: bytes) -> None:

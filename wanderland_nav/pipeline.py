@@ -10,16 +10,17 @@ depends on it. All files are written atomically (`wanderland_nav.atomic`).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import time
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.cache import json_digest, read_record
-from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
+from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh, load_collision_mesh
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.model import Scene
 
@@ -48,14 +49,34 @@ def scene_inputs(root: Path) -> list[Path]:
     return sorted(p for p in cands if p.is_file())
 
 
-def _up_to_date(output: Path, inputs: list[Path], settings_hash: str) -> bool:
+def _file_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
+def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> bool:
+    """Output exists, its sidecar's settings hash matches, it is newer than every input, and it is intact:
+    its bytes hash to the sidecar's `sha256` (a few ms), or, for sidecars written before that field,
+    `load(output)` reads it. A truncated or corrupt artefact (killed copy, full disk) is rebuilt,
+    never called up to date."""
     if not output.is_file():
         return False
     side = _read_sidecar(output)
     if side is None or side.get("settings_hash") != settings_hash:
         return False
     t_out = output.stat().st_mtime
-    return all(p.stat().st_mtime <= t_out for p in inputs)
+    if not all(p.stat().st_mtime <= t_out for p in inputs):
+        return False
+    if "sha256" in side:
+        if side["sha256"] == _file_digest(output):
+            return True
+        log.warning("%s: content does not match its sidecar (truncated or modified); rebuilding it", output)
+        return False
+    try:
+        load(output)
+    except ValueError as e:  # WanderlandInputError / NavMeshFileError: both name the file
+        log.warning("%s: cached artefact does not load (%s); rebuilding it", output, e)
+        return False
+    return True
 
 
 def capture_positions(scene: Scene) -> np.ndarray:
@@ -75,17 +96,22 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
     out = scene.root / COLLISION_MESH
     inputs = scene_inputs(scene.root)
     h = json_digest({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
-    if not force and _up_to_date(out, inputs, h):
+    if not force and _up_to_date(out, inputs, h, load_collision_mesh):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
         return out, side
+    if not np.isfinite(scene.points).all(-1).any():  # empty, or nothing finite
+        raise WanderlandInputError(f"scene {scene.name!r} has no finite points among {len(scene.points)}: the "
+                                   f"collision mesh needs a point cloud "
+                                   f"(raw_pcd.ply, points3D or lidar/ scans; inputs found: "
+                                   f"{[p.name for p in inputs]})", path=scene.root)
     t0 = time.perf_counter()
     mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
     meta = mesh.metadata.pop("collision")
     with atomic_path(out) as tmp:
         mesh.export(tmp, file_type="ply")
-    side = {"settings_hash": h, "settings": settings.as_dict(), "up_axis": scene.up_axis,
+    side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.as_dict(), "up_axis": scene.up_axis,
             "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
@@ -107,18 +133,19 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     out = scene.root / NAVMESH
     cm_side = _read_sidecar(cm) or {}
     h = json_digest({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
-    if not force and _up_to_date(out, [cm], h):
+    if not force and _up_to_date(out, [cm], h, NavMesh.load):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
         return out, side
     t0 = time.perf_counter()
-    mesh = trimesh.load(cm, file_type="ply", process=False, force="mesh")
+    mesh = load_collision_mesh(cm)
     nm = NavMesh.bake(mesh, settings)
     t_bake = time.perf_counter() - t0
     nm.save(out)  # NavMesh.save writes atomically
     islands = _island_summary(nm)
-    side = {"settings_hash": h, "settings": settings.to_dict(), "collision_settings_hash": cm_side.get("settings_hash"),
+    side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.to_dict(),
+            "collision_settings_hash": cm_side.get("settings_hash"),
             "islands": islands, "num_islands": len(islands), "area_m2": float(sum(i["area"] for i in islands)),
             "timings": {"bake_s": t_bake, "total_s": time.perf_counter() - t0}, "skipped": False}
     atomic_write_json(_sidecar(out), side)

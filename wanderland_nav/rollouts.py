@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,11 +41,12 @@ import torch
 
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError
 
 ROLLOUT_VERSION = 1
 
 
-class RolloutFormatError(ValueError):
+class RolloutFormatError(WanderlandInputError):
     """A rollout file is missing, truncated, of another version, or has a field of the wrong shape/type."""
 
 
@@ -149,7 +151,7 @@ def load_rollout(path: str | Path) -> Rollout:
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+    except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError) as e:
         raise RolloutFormatError(f"{path}: not a readable rollout .npz (truncated or corrupt): {e}") from e
     if "meta_json" not in arrays:
         raise RolloutFormatError(f"{path}: field 'meta_json' missing (not a wanderland_nav rollout file)")

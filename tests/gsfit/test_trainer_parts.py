@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import torch
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.gsfit.init import InitSettings
 from wanderland_nav.gsfit.trainer import DensifySettings, FitConfig, Trainer, fit_config_from_dict, se3_exp
 from wanderland_nav.gsfit.views import load_view, scaled_intrinsics, split_cameras, target_size
@@ -149,7 +152,7 @@ def test_checkpoint_resume_round_trip(tmp_path):
                  progress=False, resume=False)
     assert t3.step == 0
     path.write_bytes(b"garbage")
-    with pytest.raises(Exception):
+    with pytest.raises(WanderlandInputError, match=re.escape(str(path)) + ": not a readable gsfit checkpoint"):
         _trainer(tmp_path)
 
 

@@ -111,3 +111,34 @@ def test_level_many_pairs(shared_data, name):
     assert nm.area > 1000
     _check_pairs(nm, 400, seed=7, n_paths=40)
     _check_lipschitz(nm, 3000, seed=8)
+
+
+# ---- the other two levels in the default run, kept to about a second each (issue 15, item 11)
+
+
+def test_nav_test_islands_fast(shared_data):
+    """nav_test has many disconnected parts: at 0.6 m cells (~1 s instead of ~5 s at Recast's 0.3 m) it must
+    still bake several islands, and the geodesic must be finite exactly between points of one island."""
+    mesh = trimesh.load(shared_data / "meshes" / "nav_test.obj", force="mesh")
+    nm = NavMesh.bake(mesh, NavMeshSettings(cell_size=0.6))
+    areas = sorted((i.area for i in nm.islands), reverse=True)
+    assert 5 <= len(areas) <= 12 and 3000 < nm.area < 4500, areas
+    assert areas[0] > 1000 and areas[1] > 500  # the two big floors; the rest are platforms
+    d = _check_pairs(nm, 96, seed=11, n_paths=12)
+    assert (~torch.isfinite(d)).any() and torch.isfinite(d).any()  # pairs on other islands do occur
+
+
+def test_undulating_terrain_fast(shared_data):
+    """undulating is one rolling terrain near x, z = 5000: a 40 m x 40 m corner of it at Recast's settings
+    (~1 s; the whole level takes ~11 s) is one island whose paths follow the surface."""
+    mesh = trimesh.load(shared_data / "meshes" / "undulating.obj", force="mesh")
+    c = mesh.triangles_center
+    lo = mesh.bounds[0]
+    corner = mesh.submesh([np.nonzero((c[:, 0] < lo[0] + 40) & (c[:, 2] < lo[2] + 40))[0]], append=True)
+    nm = NavMesh.bake(corner, NavMeshSettings())
+    assert len(nm.islands) == 1 and 1100 < nm.area < 1600  # of 1600 m^2: steep bits and the eroded rim drop out
+    pts = nm.random_navigable_points(200, seed=0)
+    assert np.ptp(pts[:, 1]) > 3.0  # the walkable surface really undulates (+Y up)
+    d = _check_pairs(nm, 64, seed=12, n_paths=8)
+    assert torch.isfinite(d).all()
+    _check_lipschitz(nm, 300, seed=13)

@@ -69,3 +69,33 @@ def test_bc_in_fake_env_beats_untrained():
     after = _success_rate(env, act)
     assert stats["bc/dataset"] == 2 * 12 * 8
     assert after >= 0.9 and after > before + 0.3, (before, after)
+
+
+def test_bc_stops_on_a_non_finite_loss_before_the_weights_change(monkeypatch):
+    from wanderland_nav.errors import NonFiniteLossError
+
+    torch.manual_seed(0)
+    env = FakeNavEnv((4,), num_waypoints=5)
+    paths = ExpertPaths(list(env.goal_paths().numpy()))
+    p = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
+    real, calls = p.bc_loss, []
+
+    def nan_on_third(td, labels):
+        loss, metrics = real(td, labels)
+        calls.append(1)
+        return (loss * float("nan") if len(calls) == 3 else loss), metrics
+
+    monkeypatch.setattr(p, "bc_loss", nan_on_third)
+    snapshot = {}
+    orig_step = torch.optim.AdamW.step
+
+    def step_and_snapshot(opt, *a, **k):  # the weights after the last finite update
+        out = orig_step(opt, *a, **k)
+        snapshot.update({n: v.detach().clone() for n, v in p.state_dict().items()})
+        return out
+
+    monkeypatch.setattr(torch.optim.AdamW, "step", step_and_snapshot)
+    with pytest.raises(NonFiniteLossError, match=r"BC diverged at round 0 \(update 3 of the run\): loss=nan"):
+        train_bc(p, env, paths, BCConfig(rounds=1, env_steps_per_round=4, updates_per_round=5), progress=False)
+    for n, v in p.state_dict().items():
+        assert torch.equal(v, snapshot[n]), n

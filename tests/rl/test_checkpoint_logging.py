@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import math
 
 import pytest
 import torch
 
 from policies import make_policy
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights, save_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger, Logger, make_logger
 from wanderland_nav.rl.report import comparison_table, relative_change
@@ -26,7 +28,7 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     with pytest.raises(ValueError, match="c.pt.*MBRAPolicy"):
         load_policy_weights(make_policy("mbra", dim=16, depth=1, heads=2), path)
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(Exception):
+    with pytest.raises(WanderlandInputError, match=r"junk\.pt: not a readable checkpoint \(truncated or corrupt"):
         load_checkpoint(tmp_path / "junk.pt")
     torch.save({"foo": 1}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="other.pt"):
@@ -35,16 +37,23 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
         load_checkpoint(tmp_path / "missing.pt")
 
 
-def test_csv_logger_writes_and_resumes(tmp_path):
+def test_csv_logger_writes_and_resumes(tmp_path, caplog):
     lg = make_logger("console", tmp_path, console=False)
     assert isinstance(lg, Logger)
-    lg.log_scalars({"train/SR": 0.5, "losses/x": float("nan")}, 10)
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.rl.loggers"):
+        lg.log_scalars({"train/SR": 0.5, "losses/x": float("nan"), "losses/y": float("-inf")}, 10)
+        lg.log_scalars({"losses/x": float("nan")}, 11)
     lg.close()
     text = (tmp_path / "metrics.csv").read_text().splitlines()
-    assert text == ["step,key,value", "10,train/SR,0.5"]
+    # divergence shows: non-finite values are written as such, and the first of each key is a warning
+    assert text == ["step,key,value", "10,train/SR,0.5", "10,losses/x,nan", "10,losses/y,-inf", "11,losses/x,nan"]
+    assert [r.getMessage() for r in caplog.records] == [
+        "losses/x is nan at step 10 (first non-finite value of this scalar)",
+        "losses/y is -inf at step 10 (first non-finite value of this scalar)"]
     lg2 = ConsoleCSVLogger(tmp_path, console=False)
+    assert math.isnan(lg2.rows[1][2]) and lg2.rows[2][2] == float("-inf")
     lg2.log_scalars({"train/SR": 0.75}, 20)
-    assert (tmp_path / "metrics.csv").read_text().splitlines()[1:] == ["10,train/SR,0.5", "20,train/SR,0.75"]
+    assert (tmp_path / "metrics.csv").read_text().splitlines()[-1] == "20,train/SR,0.75"
     with pytest.raises(ValueError, match="unknown logger"):
         make_logger("wandb", tmp_path)
 
@@ -56,8 +65,8 @@ def test_relative_change_signs():
     table = comparison_table({"untrained": {"episodes": 4, "NE": 4.0, "SR": 0.25, "SPL": 0.2, "IR": 0.5},
                               "BC": {"episodes": 4, "NE": 2.0, "SR": 0.5, "SPL": 0.4, "IR": 0.25}}, "untrained")
     lines = table.splitlines()
-    assert lines[0].split() == ["policy", "episodes", "NE", "SR", "SPL", "IR"]
+    assert lines[0].split() == ["policy", "episodes", "NE", "distance_to_goal", "SR", "SPL", "IR"]
     assert "(+50%)" in lines[2] and "(+100%)" in lines[2]
-    assert lines[-1].startswith("(+x%): change vs untrained") and "NE/IR lower is better" in lines[-1]
+    assert lines[-1].startswith("(+x%): change vs untrained") and "NE/distance_to_goal/IR lower is better" in lines[-1]
     with pytest.raises(KeyError, match="nope"):
         comparison_table({"a": {}}, "nope")

@@ -207,7 +207,8 @@ def test_rerun_logger_protocol(recorded, tmp_path):
     lg = make_logger("rerun", tmp_path, rollout_every=2, max_agents=1)
     assert isinstance(lg, Logger)
     for i in range(3):
-        lg.log_scalars({"losses/objective": 0.5 - 0.1 * i, "eval/SR": 0.25 * i, "eval/NE": float("nan")}, step=8 * i)
+        lg.log_scalars({"losses/objective": 0.5 - 0.1 * i, "eval/SR": 0.25 * i, "eval/NE": float("nan"),
+                        "losses/critic": float("inf")}, step=8 * i)
     for i in range(3):  # every other rollout per tag is logged: calls 1 and 3 of "eval"
         lg.log_rollout(ro, step=8 * i, tag="eval")
     lg.log_rollout(ro, step=24, tag="BC")  # a tag's first call is always logged
@@ -215,7 +216,8 @@ def test_rerun_logger_protocol(recorded, tmp_path):
     assert lg.rollouts_logged == 3
     sc = scalar_entities(tmp_path / "rerun.rrd")
     np.testing.assert_allclose(sc["losses/objective"], [0.5, 0.4, 0.3])
-    assert "eval/NE" not in sc  # non-finite values are skipped
+    assert np.isnan(sc["eval/NE"]).all() and len(sc["eval/NE"]) == 3  # divergence shows: NaN logged as NaN
+    assert np.isposinf(sc["losses/critic"]).all()
     chunks = _chunks(tmp_path / "rerun.rrd")
     poses = _rows_by_entity(chunks, "Transform3D:translation", "rollout_step")
     assert len(poses["world/rollouts/eval/agents/agent_0"]) == 2 * ro.num_steps

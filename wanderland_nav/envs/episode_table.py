@@ -62,15 +62,17 @@ def build_episode_table(episodes: Sequence, scene, navmesh, *, instruction_lengt
         bad = np.flatnonzero(~np.isfinite(arr).all(-1))
         if bad.size:
             raise ValueError(f"{where}: episodes[{bad[0]}].{name}: not finite")
-    snapped = _np(navmesh.snap_point(starts, max_distance=1e6))  # judged below, naming the episode
-    off = np.linalg.norm(snapped - starts, axis=-1)
-    far = np.flatnonzero(~(off <= MAX_START_SNAP))
-    if far.size:
-        i = far[0]
-        raise ValueError(
-            f"{where}: episodes[{i}] (id {episodes[i].episode_id}).start_position lies {off[i]:.2f} m from the "
-            f"navmesh (> {MAX_START_SNAP} m): episodes and navmesh do not belong together"
-        )
+    snapped = {}  # field name -> [E, 3] scene frame, on the navmesh
+    for name, arr in (("start_position", starts), ("goals[0].position", goals)):
+        snapped[name] = _np(navmesh.snap_point(arr, max_distance=1e6))  # judged here, naming the episode
+        off = np.linalg.norm(snapped[name] - arr, axis=-1)
+        far = np.flatnonzero(~(off <= MAX_START_SNAP))
+        if far.size:
+            i = far[0]
+            raise ValueError(
+                f"{where}: episodes[{i}] (id {episodes[i].episode_id}).{name} lies {off[i]:.2f} m from the "
+                f"navmesh (> {MAX_START_SNAP} m): episodes and navmesh do not belong together"
+            )
     up = scene.up_axis
     start_yaw = np.array([e.start_yaw(up) for e in episodes], dtype=np.float64)
     goal_yaw = np.array([_final_heading(e, R) for e in episodes], dtype=np.float64)
@@ -81,7 +83,7 @@ def build_episode_table(episodes: Sequence, scene, navmesh, *, instruction_lengt
     f32 = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
     return EpisodeTable(
         ids=[e.episode_id for e in episodes],
-        start_position=f32(snapped @ R.T),
+        start_position=f32(snapped["start_position"] @ R.T),
         start_yaw=f32(start_yaw),
         goal_position=f32(goals @ R.T),
         goal_radius=f32(radius),

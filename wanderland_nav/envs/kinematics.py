@@ -9,6 +9,11 @@ navmesh). Two action modes share one integrator:
   the step, as a robot's local planner would hold it.
 * **velocity** `[B, 2]` = `(v [m/s], omega [rad/s])`, clipped to the limits and held for the period.
 
+**Non-finite actions.** An agent whose action holds any NaN or +-inf stands still for that step (pose
+unchanged): a diverged policy must not drive straight ahead (NaN steering turned into 0) or at full
+speed (inf clipped to the limit). `finite_actions` says which agents were affected; `NavEnv` counts
+them per episode (`EpisodeMetrics.nonfinite_actions`) and warns once.
+
 This module only *plans* the planar motion; `NavEnv` then asks the navmesh to realise it
 (`NavMesh.move_along_surface`: slide along walls, follow the surface height), so the kinematics
 stay testable on a plain plane. Everything is batched over agents; the only Python loop is over
@@ -43,7 +48,9 @@ def integrate_unicycle(xy: torch.Tensor, yaw: torch.Tensor, v: torch.Tensor, ome
 
 
 def clip_velocity(action: torch.Tensor, cfg: KinematicsConfig):
-    """`[B, 2]` (v, omega) -> clipped v `[B]` in [0, v_max], omega `[B]` in [-w_max, w_max]; NaN -> 0."""
+    """`[B, 2]` (v, omega) -> clipped v `[B]` in [0, v_max], omega `[B]` in [-w_max, w_max].
+
+    NaN -> 0 keeps the arithmetic finite; `plan_motion` has already held non-finite agents in place."""
     a = torch.nan_to_num(action, nan=0.0)
     v = a[..., 0].clamp(0.0, cfg.max_linear_speed)
     omega = a[..., 1].clamp(-cfg.max_angular_speed, cfg.max_angular_speed)
@@ -78,25 +85,33 @@ def select_waypoint(waypoints: torch.Tensor, cfg: KinematicsConfig) -> torch.Ten
     return wp.gather(-2, idx[..., None, None].expand(*idx.shape, 1, 2)).squeeze(-2)
 
 
+def finite_actions(action: torch.Tensor) -> torch.Tensor:
+    """`bool [B]`: the agent's whole action (`[B, 2]` or `[B, K, 2]`) is finite."""
+    return torch.isfinite(action).flatten(1).all(-1)
+
+
 def plan_motion(xy: torch.Tensor, yaw: torch.Tensor, action: torch.Tensor, cfg: KinematicsConfig):
     """Planned pose after one control period, before the navmesh constrains it.
 
     xy `[B, 2]` nav frame, yaw `[B]`, action `[B, K, 2]` (waypoints) or `[B, 2]` (velocity)
-    -> (xy `[B, 2]`, yaw `[B]`).
+    -> (xy `[B, 2]`, yaw `[B]`). Agents with a non-finite action keep their pose (module docstring).
     """
     dt = cfg.control_period
     if cfg.action_mode == "velocity":
         if action.shape[-1:] != (2,) or action.dim() != xy.dim():
             raise ValueError(f"kinematics: velocity action must be [B, 2] (v, omega), got {tuple(action.shape)}")
         v, omega = clip_velocity(action, cfg)
-        return integrate_unicycle(xy, yaw, v, omega, dt)
-    if action.dim() != xy.dim() + 1 or action.shape[-1] != 2:
-        raise ValueError(f"kinematics: waypoint action must be [B, K, 2] (body frame), got {tuple(action.shape)}")
-    target_world = body_to_world_2d(select_waypoint(action, cfg).unsqueeze(-2), xy, yaw).squeeze(-2)  # [B, 2]
-    h = dt / cfg.substeps
-    for i in range(cfg.substeps):  # fixed count of time substeps, not agents
-        target_body = world_to_body_2d(target_world.unsqueeze(-2), xy, yaw).squeeze(-2)
-        v, omega = track_point_command(target_body, dt - i * h, h, cfg)
-        xy, yaw = integrate_unicycle(xy, yaw, v, omega, h)
-    return xy, yaw
+        new_xy, new_yaw = integrate_unicycle(xy, yaw, v, omega, dt)
+    else:
+        if action.dim() != xy.dim() + 1 or action.shape[-1] != 2:
+            raise ValueError(f"kinematics: waypoint action must be [B, K, 2] (body frame), got {tuple(action.shape)}")
+        target_world = body_to_world_2d(select_waypoint(action, cfg).unsqueeze(-2), xy, yaw).squeeze(-2)  # [B, 2]
+        h = dt / cfg.substeps
+        new_xy, new_yaw = xy, yaw
+        for i in range(cfg.substeps):  # fixed count of time substeps, not agents
+            target_body = world_to_body_2d(target_world.unsqueeze(-2), new_xy, new_yaw).squeeze(-2)
+            v, omega = track_point_command(target_body, dt - i * h, h, cfg)
+            new_xy, new_yaw = integrate_unicycle(new_xy, new_yaw, v, omega, h)
+    ok = finite_actions(action)
+    return torch.where(ok[:, None], new_xy, xy), torch.where(ok, new_yaw, yaw)
 

@@ -1,10 +1,18 @@
 """Per-episode navigation metrics and their aggregation (NE / SR / SPL / IR), as the paper reports them.
 
-* NE: navigation error, the geodesic distance (metres) from where the episode ended to the goal;
+* NE: navigation error, the paper's definition: the **Euclidean** (straight-line, 3-D, nav frame)
+  distance in metres from where the episode ended to the goal;
+* distance_to_goal: the **geodesic** distance (navmesh, metres) from where the episode ended to the
+  goal, its own column: what the agent would still have to walk (inf when the end point has no
+  geodesic to the goal, e.g. it left the goal's island);
 * SR: success rate; SPL: success weighted by path length, `S * l / max(p, l)` with `l` the
-  geodesic shortest length from the start and `p` the travelled length (Anderson et al. 2018);
+  geodesic shortest length from the start and `p` the travelled length (Anderson et al. 2018).
+  Both lengths are **horizontal** (nav-frame x, y): the navmesh geodesic is a horizontal length
+  (`planners` docs), so measuring `p` in 3-D would bias SPL low on ramps and stairs;
 * IR: intervention rate (episodes ended because the agent got stuck, made no progress or left
-  the navigable region; timeouts are counted apart).
+  the navigable region; timeouts are counted apart);
+* nonfinite_actions: steps in which the policy sent a NaN/inf action (the agent stood still, see
+  `envs.kinematics`); any non-zero mean means the policy diverged, whatever SR says.
 
 `NavEnv` fills `EpisodeMetrics` for every finished episode (`NavEnv.pop_finished_metrics()`), so
 a trainer aggregates rollouts and the evaluator aggregates test episodes with the same code.
@@ -17,7 +25,8 @@ from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
 
 GROUPS = ("overall", "indoor", "outdoor")
-COLUMNS = ("episodes", "NE", "SR", "SPL", "IR", "path_length", "collisions", "steps")
+COLUMNS = ("episodes", "NE", "distance_to_goal", "SR", "SPL", "IR", "path_length", "collisions", "steps",
+           "nonfinite_actions")
 
 
 @dataclass
@@ -26,17 +35,19 @@ class EpisodeMetrics:
 
     episode_id: int | str
     episode_index: int  # index in the env's episode list
-    navigation_error: float  # geodesic distance to the goal at the end (Euclidean if unreachable)
+    navigation_error: float  # NE: Euclidean (3-D) distance from the end position to the goal
     success: bool
     spl: float
     intervention: bool
     timeout: bool
-    path_length: float  # metres travelled (3D, along the realised motion)
-    shortest_length: float  # geodesic start -> goal
+    path_length: float  # metres travelled, horizontal (nav x, y), like the geodesic it is compared with
+    shortest_length: float  # geodesic start -> goal (horizontal)
     collisions: int  # steps in which the navmesh blocked or deflected the motion
     steps: int
     environment: str | None = None  # "indoor" | "outdoor" | None (scene does not say)
     serial: int = -1  # order in which the env started this episode since its last seed
+    distance_to_goal: float = float("nan")  # geodesic (navmesh) distance from the end position to the goal
+    nonfinite_actions: int = 0  # steps with a NaN/inf action (the agent stood still)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -52,8 +63,8 @@ def spl(success: bool, shortest: float, travelled: float) -> float:
 def aggregate_metrics(episodes: Iterable[EpisodeMetrics]) -> dict[str, dict[str, float]]:
     """Means over episodes: `{"overall": {...}, "indoor": {...}, "outdoor": {...}}`.
 
-    Each group holds `COLUMNS` (episodes = count; NE/path_length/collisions/steps are means,
-    SR/SPL/IR fractions). Indoor/outdoor groups appear only when some episode carries that label.
+    Each group holds `COLUMNS` (episodes = count; NE/distance_to_goal/path_length/collisions/steps/
+    nonfinite_actions are means, SR/SPL/IR fractions). Indoor/outdoor groups appear only when some episode carries that label.
     """
     eps = list(episodes)
     out = {"overall": _summarise(eps)}
@@ -75,12 +86,14 @@ def _summarise(eps: Sequence[EpisodeMetrics]) -> dict[str, float]:
     return {
         "episodes": n,
         "NE": mean(e.navigation_error for e in eps),
+        "distance_to_goal": mean(e.distance_to_goal for e in eps),
         "SR": mean(float(e.success) for e in eps),
         "SPL": mean(e.spl for e in eps),
         "IR": mean(float(e.intervention) for e in eps),
         "path_length": mean(e.path_length for e in eps),
         "collisions": mean(e.collisions for e in eps),
         "steps": mean(e.steps for e in eps),
+        "nonfinite_actions": mean(e.nonfinite_actions for e in eps),
     }
 
 

@@ -18,6 +18,7 @@ may be kept by a rollout, and must not change afterwards.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -33,10 +34,12 @@ from wanderland_nav import keys
 from wanderland_nav.envs.camera import AgentCamera, Renderer
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table, load_goal_images
-from wanderland_nav.envs.kinematics import plan_motion
+from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.metrics import EpisodeMetrics, spl
 from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
+
+log = logging.getLogger(__name__)
 
 
 class NavEnv(EnvBase):
@@ -176,7 +179,8 @@ class NavEnv(EnvBase):
         self._pos_hist = z(T, 3)
         self._dist = z()
         self._progress = ProgressState(z(), z(dtype=torch.long), z(dtype=torch.long))
-        self._path_len, self._collisions = z(), z(dtype=torch.long)
+        self._path_len, self._collisions, self._nonfinite = z(), z(dtype=torch.long), z(dtype=torch.long)
+        self._nonfinite_warned = False
         self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
         self._agent_goal_image = z(H, W, 3, dtype=torch.uint8)
         self._agent_has_goal_image = z(1, dtype=torch.bool)
@@ -210,9 +214,12 @@ class NavEnv(EnvBase):
         cfg = self.config
         action = tensordict.get(keys.ACTION).to(self.device, torch.float32)
         plan_xy, plan_yaw = plan_motion(self._pos[:, :2], self._yaw, action, cfg.kinematics)
+        nonfinite = ~finite_actions(action)  # [B]: these agents stand still this step (kinematics docs)
+        self._count_nonfinite(nonfinite)
         target = torch.cat([plan_xy, self._pos[:, 2:]], -1)  # [B, 3] nav: the surface sets the height
         end, collided = self._move(self._pos, target)
         moved = (end - self._pos).norm(dim=-1)
+        moved_xy = (end[:, :2] - self._pos[:, :2]).norm(dim=-1)  # path length is horizontal, as the geodesic (SPL)
         if cfg.termination.check_navigable:
             navigable = self._navigable(end)
         else:
@@ -226,7 +233,7 @@ class NavEnv(EnvBase):
         )
         reward = navigation_reward(self._dist, d_now, success, intervention, cfg.reward)
         self._pos, self._yaw, self._steps, self._dist, self._progress = end, plan_yaw, steps, d_now, progress
-        self._path_len = self._path_len + moved
+        self._path_len = self._path_len + moved_xy
         self._collisions = self._collisions + collided.long()
         self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
         t2 = time.perf_counter()
@@ -255,6 +262,15 @@ class NavEnv(EnvBase):
         tm["step"] += t4 - t0
         tm["frames"] += self.batch_size[0]
         return out
+
+    def _count_nonfinite(self, nonfinite: torch.Tensor) -> None:
+        """Count NaN/inf actions per agent (reported as `EpisodeMetrics.nonfinite_actions`); warn once."""
+        self._nonfinite = self._nonfinite + nonfinite.long()
+        if not self._nonfinite_warned and bool(nonfinite.any()):
+            self._nonfinite_warned = True
+            log.warning("NavEnv: %d of %d agents sent a NaN/inf action; they stand still for the step. Counted "
+                        "per episode in the metric nonfinite_actions (a diverged policy?)",
+                        int(nonfinite.sum()), nonfinite.numel())
 
     # ------------------------------------------------------------------ episodes
 
@@ -291,6 +307,7 @@ class NavEnv(EnvBase):
         p = self._progress
         self._progress = ProgressState(put(p.best_distance, d0), put(p.steps_without_progress, zl), put(p.stuck_steps, zl))
         self._path_len, self._collisions = put(self._path_len, zl.float()), put(self._collisions, zl)
+        self._nonfinite = put(self._nonfinite, zl)
         self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
         self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
         self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
@@ -303,7 +320,9 @@ class NavEnv(EnvBase):
             {
                 "episode_index": ep,
                 "serial": self._serial[idx],
-                "ne": self._dist[idx],
+                "ne": (self.table.goal_position[ep] - self._pos[idx]).norm(dim=-1),  # Euclidean, as the paper
+                "distance_to_goal": self._dist[idx],  # geodesic
+                "nonfinite_actions": self._nonfinite[idx],
                 "success": success[idx],
                 "intervention": intervention[idx],
                 "timeout": truncated[idx],
@@ -339,6 +358,8 @@ class NavEnv(EnvBase):
                     steps=int(cols["steps"][j]),
                     environment=self.table.environment[e],
                     serial=int(cols["serial"][j]),
+                    distance_to_goal=float(cols["distance_to_goal"][j]),
+                    nonfinite_actions=int(cols["nonfinite_actions"][j]),
                 )
                 out.append(m)
         self._finished = []

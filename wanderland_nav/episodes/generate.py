@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -35,6 +36,8 @@ from wanderland_nav.episodes.schema import (
     save_episodes,
 )
 from wanderland_nav.geometry import wrap_angle
+
+log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
 HIST_EDGES = (0, 5, 10, 15, 20, 30, 50, 100, math.inf)  # metres, for the length histogram
@@ -281,6 +284,37 @@ def _up_to_date(out: Path, digest: str) -> list[Episode] | None:
     return f.episodes
 
 
+GENERATOR_NAME = "wanderland_nav.expert"  # the `generator.name` this project writes into its episode files
+
+
+def written_by_us(path: Path) -> bool:
+    """Whether `path` is an episodes file this project wrote (valid schema and our `generator` block)."""
+    try:
+        f = load_episode_file(path)
+    except (EpisodeFormatError, OSError):
+        return False
+    gen = f.extras.get("generator")
+    return isinstance(gen, dict) and gen.get("name") == GENERATOR_NAME
+
+
+def generated_sibling(path: Path) -> Path:
+    """`episodes.json` -> `episodes.generated.json` (`x.json.gz` -> `x.generated.json.gz`)."""
+    stem, _, suffixes = path.name.partition(".")
+    return path.with_name(f"{stem}.generated.{suffixes}" if suffixes else f"{stem}.generated")
+
+
+def episodes_target(out: Path, *, force: bool) -> Path:
+    """Where to write: `out`, unless `out` exists and this project did not write it (released data, a
+    hand-edited or foreign file): then its `generated_sibling`, so released data is never overwritten.
+    `force=True` overwrites whatever is at `out`."""
+    if force or not out.exists() or written_by_us(out):
+        return out
+    target = generated_sibling(out)
+    log.warning("%s was not written by %s (released data?): left untouched; generated episodes go to %s "
+                "(force=true overwrites it)", out, GENERATOR_NAME, target)
+    return target
+
+
 def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: int,
                          settings: GeneratorSettings | None = None,
                          instructions: InstructionGenerator | None = None, force: bool = False,
@@ -288,30 +322,37 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
     """Generate and write `out` (atomic) with goal images in `out.parent / "goal_images"`.
 
     A rerun with the same scene navmesh, count, seed and settings finds the stored args hash and
-    returns the file's episodes without regenerating (`summary.skipped`), unless `force`.
+    returns the file's episodes without regenerating (`summary.skipped`), unless `force`. A file at
+    `out` that this project did not write is never replaced (unless `force`): the episodes go to
+    `episodes.generated.json` beside it, goal images to `goal_images.generated/`, and
+    `summary.out` (also logged) names the file used.
     """
     settings = settings or GeneratorSettings()
     instructions = instructions or RuleBasedInstructions()
-    out = Path(out)
+    requested = Path(out)
+    out = episodes_target(requested, force=force)
+    image_dir = out.parent / ("goal_images" if out == requested else "goal_images.generated")
     digest = args_hash(scene.name, num_episodes, seed, settings, getattr(instructions, "name", type(instructions).__name__),
                        navmesh_fingerprint(getattr(scene, "navmesh_path", None)))
     if not force:
         existing = _up_to_date(out, digest)
         if existing is not None:
             split_counts = {s: sum(e.split == s for e in existing) for s in ("train", "val", "test")}
+            log.info("%s: episodes up to date in %s", scene.name, out)
             return existing, GenerationSummary(
                 scene=scene.name, requested=num_episodes, kept=len(existing), candidates=0, rounds=0,
                 rejections={}, length_hist=length_histogram([e.geodesic_distance for e in existing]),
                 splits=split_counts, skipped=True, out=str(out))
     episodes, summary = generate_episodes(
         scene, navmesh, num_episodes=num_episodes, seed=seed, settings=settings, instructions=instructions,
-        goal_image_dir=out.parent / "goal_images", progress=progress)
+        goal_image_dir=image_dir, progress=progress)
     extras = {
-        "generator": {"name": "wanderland_nav.expert", "format": FORMAT_VERSION, "args_hash": digest,
+        "generator": {"name": GENERATOR_NAME, "format": FORMAT_VERSION, "args_hash": digest,
                       "num_episodes": num_episodes, "seed": seed, "instructions": instructions.name,
                       "settings": settings.to_dict()},
         "summary": summary.to_dict(),
     }
     save_episodes(out, episodes, extras)
     summary.out = str(out)
+    log.info("%s: %d episodes written to %s", scene.name, len(episodes), out)
     return episodes, summary

@@ -37,6 +37,7 @@ import gzip
 import json
 import math
 import os
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -44,6 +45,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from wanderland_nav.atomic import atomic_write_bytes
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
 
 #: The fields this schema owns, in the order they are written. Everything else is an extra.
@@ -66,7 +68,7 @@ QUAT_NORM_TOL = 1e-3
 SPLITS = ("train", "val", "test")
 
 
-class EpisodeFormatError(ValueError):
+class EpisodeFormatError(WanderlandInputError):
     """An episodes file (or an Episode built in code) does not follow the schema."""
 
 
@@ -247,7 +249,7 @@ def load_episode_file(path: str | os.PathLike) -> EpisodeFile:
     if path.suffix == ".gz":
         try:
             raw = gzip.decompress(raw)
-        except OSError as e:
+        except (OSError, EOFError, zlib.error) as e:  # a truncated .gz raises EOFError
             raise EpisodeFormatError(f"{path}: not a valid gzip file ({e})") from None
     try:
         data = json.loads(raw.decode("utf-8"))

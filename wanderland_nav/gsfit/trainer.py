@@ -27,6 +27,7 @@ import torch
 from tqdm.auto import tqdm
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError, torch_load
 from wanderland_nav.gsfit.cull import visible_gaussians
 from wanderland_nav.gsfit.depth_prior import depth_priors
 from wanderland_nav.gsfit.init import InitSettings, active_sh_degree, init_params
@@ -399,7 +400,7 @@ class Trainer:
         return self.checkpoint_path
 
     def load_checkpoint(self, path: Path) -> None:
-        blob = torch.load(path, map_location=self.device, weights_only=True)
+        blob = torch_load(path, what="gsfit checkpoint", weights_only=True, map_location=self.device)
         try:
             params = blob["params"]
             for k in PARAM_NAMES:
@@ -412,8 +413,8 @@ class Trainer:
             self._order = list(blob["order"])
             self._grad_accum = blob["grad_accum"].to(self.device)
             self._grad_count = blob["grad_count"].to(self.device)
-        except (KeyError, ValueError, RuntimeError) as e:
-            raise ValueError(f"{path}: not a compatible gsfit checkpoint ({e})") from e
+        except (KeyError, TypeError, ValueError, RuntimeError) as e:
+            raise WanderlandInputError(f"not a compatible gsfit checkpoint ({e})", path=path) from e
 
     # ---- the loop ------------------------------------------------------------------------
     def train(self) -> dict[str, float]:

@@ -9,10 +9,15 @@ made explicit:
 
 Tensors: images [H, W, 3] float32 in [0, 1], masks [H, W, 1] bool (True = valid pixel),
 cam_from_world [4, 4] float32 (scene frame -> OpenCV camera), K [3, 3] float32.
+
+Lens distortion (`Camera.distortion`) is removed here (`gsfit.undistort`): the view holds the image
+resampled onto the ideal pinhole / equidistant-fisheye model the renderer draws, and says so
+(`View.undistorted`, one log line per distortion model).
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -20,6 +25,11 @@ from typing import Sequence
 import numpy as np
 import torch
 from PIL import Image
+
+from wanderland_nav.gsfit.undistort import has_distortion, undistort_view_arrays
+
+log = logging.getLogger(__name__)
+_LOGGED_MODELS: set[str] = set()  # distortion models already announced in the log
 
 
 @dataclass
@@ -32,6 +42,7 @@ class View:
     width: int
     height: int
     camera_model: str
+    undistorted: bool = False  # the image was resampled from the camera's distortion onto the ideal model
 
     @property
     def shape_key(self) -> tuple[int, int, str]:
@@ -90,13 +101,22 @@ def load_view(camera, downscale: float = 1.0, max_width: int | None = None) -> V
     world_from_cam = np.asarray(camera.world_from_cam, dtype=np.float64)
     if world_from_cam.shape != (4, 4):
         raise ValueError(f"camera {camera.name}: world_from_cam must be [4,4], got {world_from_cam.shape}")
+    image = _read_rgb(Path(camera.image_path), (w, h), "image")
+    mask = _read_mask(camera.mask_path, (w, h))
+    distortion = getattr(camera, "distortion", None)
+    undistorted = has_distortion(camera.camera_model, distortion)
+    if undistorted:  # distortion coefficients act on normalised coordinates: unchanged by the resize
+        image, mask = undistort_view_arrays(image, mask, K, distortion, camera.camera_model)
+        kind = "OpenCV fisheye k1..k4" if camera.camera_model == "fisheye" else "OpenCV radial-tangential k1,k2,p1,p2"
+        if kind not in _LOGGED_MODELS:
+            _LOGGED_MODELS.add(kind)
+            log.info("camera %s (and others with %s distortion): images undistorted onto the ideal %s model "
+                     "for fitting; pixels with no source are masked out", camera.name, kind, camera.camera_model)
     return View(
-        name=camera.name,
-        image=_read_rgb(Path(camera.image_path), (w, h), "image"),
-        mask=_read_mask(camera.mask_path, (w, h)),
+        name=camera.name, image=image, mask=mask,
         cam_from_world=torch.from_numpy(np.linalg.inv(world_from_cam).astype(np.float32)),
         K=torch.from_numpy(K.astype(np.float32)),
-        width=w, height=h, camera_model=camera.camera_model,
+        width=w, height=h, camera_model=camera.camera_model, undistorted=undistorted,
     )
 
 

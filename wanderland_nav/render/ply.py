@@ -12,10 +12,11 @@ import os
 
 import numpy as np
 
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.plyio import element_table, read_ply_data, write_ply_table
 
 
-class PlyError(ValueError):
+class PlyError(WanderlandInputError):
     """A PLY file that cannot be read as a vertex table; the message names the file."""
 
 

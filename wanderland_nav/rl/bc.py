@@ -29,6 +29,7 @@ from tqdm.auto import tqdm
 from policies.base import NavPolicy
 from wanderland_nav import keys as K
 from wanderland_nav.envs.experts import arc_lengths, pad_paths, waypoints_along_path
+from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.loggers import Logger
 
 log = logging.getLogger(__name__)
@@ -159,6 +160,9 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
             idx = torch.randint(0, data.shape[0], (min(cfg.batch_size, data.shape[0]),), generator=g)
             mb = data[idx]
             loss, metrics = policy.bc_loss(mb.exclude("_label"), mb.get("_label"))
+            if not bool(torch.isfinite(loss)):  # stop before the optimiser writes NaN into the weights
+                raise NonFiniteLossError(f"BC diverged at round {r} (update {step - step_offset + 1} of the run): "
+                                         f"loss={float(loss.detach())}; the weights are those of the previous update")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(policy.trainable_parameters(), cfg.max_grad_norm)

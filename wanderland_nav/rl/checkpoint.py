@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError, torch_load
 
 CHECKPOINT_VERSION = 1
 
@@ -52,15 +53,15 @@ def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: tor
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
+    """Read a checkpoint; missing -> FileNotFoundError, truncated/corrupt/foreign -> WanderlandInputError."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
     # weights_only=False: the payload holds numpy RNG state and the config dict; checkpoints are our own
-    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    ckpt = torch_load(path, what="checkpoint", weights_only=False)
     if not isinstance(ckpt, dict) or "policy" not in ckpt:
-        raise ValueError(f"{path}: not a wanderland_nav checkpoint (no 'policy' field)")
+        raise WanderlandInputError("not a wanderland_nav checkpoint (no 'policy' field)", path=path)
     if ckpt.get("version") != CHECKPOINT_VERSION:
-        raise ValueError(f"{path}: checkpoint version {ckpt.get('version')} != {CHECKPOINT_VERSION}")
+        raise WanderlandInputError(f"checkpoint version {ckpt.get('version')} != {CHECKPOINT_VERSION}",
+                                   path=path, field="version")
     return ckpt
 
 

@@ -32,7 +32,10 @@ class Logger(Protocol):
 class ConsoleCSVLogger:
     """Prints a compact line per call (every `print_every` steps) and keeps `metrics.csv` (long format:
     `step,key,value`) up to date. The CSV is rewritten atomically each `flush_every` calls and at
-    `close()`, so a killed run leaves a complete (if slightly stale) file, never a torn one."""
+    `close()`, so a killed run leaves a complete (if slightly stale) file, never a torn one.
+
+    NaN and +-inf are written as such (`nan`, `inf`) and the first one of each key is a warning: a
+    diverged run must look diverged, not like a run whose losses stopped being logged."""
 
     def __init__(self, out_dir: str | Path | None, *, print_every: int = 1, flush_every: int = 1,
                  console: bool = True):
@@ -43,10 +46,14 @@ class ConsoleCSVLogger:
                 self.rows = [(int(r["step"]), r["key"], float(r["value"])) for r in csv.DictReader(f)]
         self.print_every, self.flush_every, self.console = print_every, flush_every, console
         self._calls = 0
+        self._warned: set[str] = set()  # keys already reported as non-finite
 
     def log_scalars(self, scalars: dict[str, float], step: int) -> None:
-        clean = {k: float(v) for k, v in scalars.items() if v is not None and math.isfinite(float(v))}
+        clean = {k: float(v) for k, v in scalars.items() if v is not None}
         self.rows.extend((int(step), k, v) for k, v in clean.items())
+        for k in sorted(k for k, v in clean.items() if not math.isfinite(v) and k not in self._warned):
+            self._warned.add(k)
+            log.warning("%s is %s at step %d (first non-finite value of this scalar)", k, clean[k], step)
         self._calls += 1
         if self.console and self._calls % self.print_every == 0 and clean:
             log.info("step %d | %s", step, " ".join(f"{k}={v:.4g}" for k, v in sorted(clean.items())))

@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 
 from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
+from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.loggers import Logger
 
@@ -115,11 +116,12 @@ def env_episode_metrics(collector) -> dict[str, float]:
     from wanderland_nav.envs.metrics import aggregate_metrics
 
     o = aggregate_metrics(finished)["overall"]
-    return {"train/episodes": o["episodes"], **{f"train/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}}
+    return {"train/episodes": o["episodes"],
+            **{f"train/{k}": o[k] for k in ("NE", "distance_to_goal", "SR", "SPL", "IR", "nonfinite_actions")}}
 
 
 def episode_stats(batch: TensorDictBase) -> dict[str, float]:
-    """SR / IR / NE / return over the episodes that ended inside a collected batch `[..., T]`."""
+    """SR / IR / distance_to_goal / return over the episodes that ended inside a collected batch `[..., T]`."""
     nxt = batch.get("next")
     done = nxt.get(K.DONE).squeeze(-1)
     out = {"train/reward_mean": float(nxt.get(K.REWARD).mean())}
@@ -130,8 +132,8 @@ def episode_stats(batch: TensorDictBase) -> dict[str, float]:
             out["train/SR"] = float(nxt.get(K.SUCCESS).squeeze(-1)[done].float().mean())
         if K.INTERVENTION in nxt.keys(True):
             out["train/IR"] = float(nxt.get(K.INTERVENTION).squeeze(-1)[done].float().mean())
-        if K.DISTANCE_TO_GOAL in nxt.keys(True):
-            out["train/NE"] = float(nxt.get(K.DISTANCE_TO_GOAL).squeeze(-1)[done].mean())
+        if K.DISTANCE_TO_GOAL in nxt.keys(True):  # the env's distance (geodesic in NavEnv): not the paper's NE
+            out["train/distance_to_goal"] = float(nxt.get(K.DISTANCE_TO_GOAL).squeeze(-1)[done].mean())
     return out
 
 
@@ -203,11 +205,13 @@ class PPOTrainer:
             for start in range(0, n - cfg.minibatch_size + 1, cfg.minibatch_size):
                 mb = flat[perm[start:start + cfg.minibatch_size]]
                 out = self.loss(mb)
-                total = out["loss_critic"] if warmup else (
-                    out["loss_objective"] + out["loss_critic"] + out.get("loss_entropy", 0.0))
+                terms = ("loss_critic",) if warmup else ("loss_objective", "loss_critic", "loss_entropy")
+                self._check_finite(out, terms, epoch, start // cfg.minibatch_size)
+                total = sum(out[t] for t in terms if t in out.keys())
                 self.optim.zero_grad(set_to_none=True)
                 total.backward()
                 gn = torch.nn.utils.clip_grad_norm_(self.policy.trainable_parameters(), cfg.max_grad_norm)
+                self._check_finite({"grad_norm": gn}, ("grad_norm",), epoch, start // cfg.minibatch_size)
                 self.optim.step()
                 stats = {
                     "losses/objective": out["loss_objective"], "losses/critic": out["loss_critic"],
@@ -231,6 +235,20 @@ class PPOTrainer:
         res["losses/critic_warmup"] = float(warmup)
         res["losses/std_mean"] = float(self.policy.scale().detach().mean())
         return res
+
+    def _check_finite(self, values, names, epoch: int, minibatch: int) -> None:
+        """Stop before a non-finite loss or gradient reaches the weights: the optimiser has not stepped,
+        and `last.pt` still holds the previous iteration's (finite) state."""
+        bad = {n: float(torch.as_tensor(values[n]).detach().float().mean()) for n in names
+               if n in values.keys() and not bool(torch.isfinite(torch.as_tensor(values[n])).all())}
+        if bad:
+            last = self.checkpointer.last if self.checkpointer is not None else None
+            kept = (f"the last good checkpoint {last} (iteration {self.iteration}) is intact"
+                    if last is not None and last.is_file() else "no checkpoint was written yet")
+            raise NonFiniteLossError(
+                f"PPO diverged at iteration {self.iteration + 1} (epoch {epoch}, minibatch {minibatch}): "
+                f"non-finite {', '.join(f'{n}={v}' for n, v in bad.items())}; {kept}. Lower algo.ppo.lr / "
+                f"critic_lr or max_grad_norm, or look for NaN rewards or observations")
 
     # -------------------------------------------------------------- the loop
     def train(self) -> dict[str, float]:

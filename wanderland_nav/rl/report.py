@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import math
 
-TABLE_COLUMNS = ("NE", "SR", "SPL", "IR")
+#: NE = Euclidean end-to-goal distance (the paper's), distance_to_goal = geodesic end-to-goal distance,
+#: SPL with horizontal lengths; definitions in `wanderland_nav.envs.metrics`
+TABLE_COLUMNS = ("NE", "distance_to_goal", "SR", "SPL", "IR")
 #: lower is better for these; the sign of the relative change is flipped so "+" always means better
-LOWER_IS_BETTER = {"NE", "IR"}
+LOWER_IS_BETTER = {"NE", "distance_to_goal", "IR"}
+METRE_COLUMNS = {"NE", "distance_to_goal"}  # printed in metres (2 decimals), the others as fractions
 
 
 def relative_change(new: float, base: float, column: str) -> float:
@@ -28,7 +31,7 @@ def comparison_table(rows: dict[str, dict[str, float]], baseline: str | None = N
         cells = [name, str(int(r.get("episodes", 0)))]
         for c in columns:
             v = float(r.get(c, float("nan")))
-            cell = f"{v:.2f}" if c == "NE" else f"{v:.3f}"
+            cell = f"{v:.2f}" if c in METRE_COLUMNS else f"{v:.3f}"
             if baseline is not None and name != baseline:
                 rc = relative_change(v, float(rows[baseline].get(c, float("nan"))), c)
                 cell += f" ({rc:+.0%})" if math.isfinite(rc) else " (n/a)"

@@ -32,6 +32,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -41,6 +42,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
 
 log = logging.getLogger(__name__)
@@ -161,6 +163,25 @@ def unseen_top_faces(verts_nav: np.ndarray, faces: np.ndarray, centers_nav: np.n
         _, idx = tree.query(c[:, :2])
         out[s + cand] = c[:, 2] > centers_nav[idx, 2] + above
     return out
+
+
+def load_collision_mesh(path) -> trimesh.Trimesh:
+    """Read a `collision_mesh.ply` (scene frame, metres); unreadable or faceless -> WanderlandInputError naming it.
+
+    trimesh's own messages ("PLY is unexpected length!") name no file, and an empty mesh would
+    bake an empty navmesh that only fails much later, far from the cause.
+    """
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"collision mesh not found: {path}")
+    try:
+        mesh = trimesh.load(str(path), file_type="ply", process=False, force="mesh")
+    except (ValueError, IndexError, KeyError, TypeError, OSError, AttributeError) as e:
+        raise WanderlandInputError(f"not a readable collision-mesh PLY (truncated or corrupt: {e}); delete it "
+                                   "and run prepare again", path=path) from e
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise WanderlandInputError("collision mesh has no faces (truncated, or not a triangle mesh)",
+                                   path=path, field="face")
+    return mesh
 
 
 def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,

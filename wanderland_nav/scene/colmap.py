@@ -17,6 +17,7 @@ corrupts everything downstream.
 
 from __future__ import annotations
 
+import logging
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,9 +25,13 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.errors import WanderlandInputError
 
 
-class ColmapFormatError(ValueError):
+log = logging.getLogger(__name__)
+
+
+class ColmapFormatError(WanderlandInputError):
     """A COLMAP file is missing, truncated or malformed (message names file and field)."""
 
 
@@ -55,6 +60,14 @@ _MODELS = [
                 ("fx", "fy", "cx", "cy", "k0", "k1", "k2", "k3", "k4", "k5", "p0", "p1", "s0", "s1", "s2", "s3")),
 ]
 CAMERA_MODELS: dict[int, CameraModel] = {m.model_id: m for m in _MODELS}
+_WARNED_DROPPED: set[tuple[str, int]] = set()  # (model, camera id) already warned about unmodelled distortion
+
+
+def _num_distortion(m: "CameraModel") -> int:
+    """How many of a model's parameters are distortion terms (all after f / fx, fy, cx, cy)."""
+    return m.num_params - (3 if m.param_names[0] == "f" else 4)
+
+
 CAMERA_MODELS_BY_NAME: dict[str, CameraModel] = {m.name: m for m in _MODELS}
 FISHEYE_MODELS = {"OPENCV_FISHEYE", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE", "THIN_PRISM_FISHEYE",
                   "RAD_TAN_THIN_PRISM_FISHEYE", "FOV"}
@@ -99,12 +112,24 @@ class ColmapCamera:
             d = [p["k1"], p["k2"], 0.0, 0.0]
         elif m.name == "OPENCV":
             d = [p["k1"], p["k2"], p["p1"], p["p2"]]
-        elif m.name in ("OPENCV_FISHEYE", "FULL_OPENCV", "THIN_PRISM_FISHEYE"):
-            d = [p["k1"], p["k2"], p.get("k3", p.get("p1", 0.0)), p.get("k4", p.get("p2", 0.0))]
+        elif m.name == "FULL_OPENCV":  # radial-tangential like OPENCV (was k1, k2, k3, k4: read as p1, p2)
+            d = [p["k1"], p["k2"], p["p1"], p["p2"]]
+        elif m.name in ("OPENCV_FISHEYE", "THIN_PRISM_FISHEYE"):
+            d = [p["k1"], p["k2"], p["k3"], p["k4"]]
         elif m.name == "RAD_TAN_THIN_PRISM_FISHEYE":
             d = [p["k0"], p["k1"], p["k2"], p["k3"]]
         else:
             d = [0.0] * 4
+        kept = {"OPENCV": ("k1", "k2", "p1", "p2"), "FULL_OPENCV": ("k1", "k2", "p1", "p2"),
+                "OPENCV_FISHEYE": ("k1", "k2", "k3", "k4"), "THIN_PRISM_FISHEYE": ("k1", "k2", "k3", "k4"),
+                "RAD_TAN_THIN_PRISM_FISHEYE": ("k0", "k1", "k2", "k3"), "SIMPLE_RADIAL": ("k",),
+                "SIMPLE_RADIAL_FISHEYE": ("k",), "RADIAL": ("k1", "k2"), "RADIAL_FISHEYE": ("k1", "k2")}.get(m.name, ())
+        dropped = tuple(n for n in m.param_names[len(m.param_names) - _num_distortion(m):] if n not in kept and p[n] != 0)
+        if dropped and (m.name, self.camera_id) not in _WARNED_DROPPED:
+            _WARNED_DROPPED.add((m.name, self.camera_id))
+            log.warning("COLMAP camera %d (%s): distortion terms %s are not modelled (only %s are): images of "
+                        "this camera are undistorted approximately", self.camera_id, m.name, list(dropped),
+                        list(kept) or "none")
         return K, np.asarray(d, dtype=np.float64)
 
 

@@ -14,10 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
 
 
-class SceneFormatError(ValueError):
+class SceneFormatError(WanderlandInputError):
     """A scene folder is missing something it needs or holds inconsistent data (names file + field)."""
 
 

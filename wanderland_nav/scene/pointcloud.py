@@ -16,9 +16,10 @@ import numpy as np
 import plyfile
 
 from wanderland_nav.plyio import read_ply_data, write_ply_table
+from wanderland_nav.errors import WanderlandInputError
 
 
-class PointCloudFormatError(ValueError):
+class PointCloudFormatError(WanderlandInputError):
     """A point-cloud file is missing, truncated or malformed (message names file and property)."""
 
 

@@ -14,7 +14,6 @@ streamed as the run goes (a killed run leaves a readable, footer-less recording)
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 from typing import Any
 
@@ -65,14 +64,13 @@ class RerunLogger:
         return self.rollout_every > 0
 
     def log_scalars(self, scalars: dict[str, float], step: int) -> None:
-        """Each `group/name` scalar becomes the time series entity `group/name` on timeline `step`."""
+        """Each `group/name` scalar becomes the time series entity `group/name` on timeline `step`.
+
+        NaN / inf are logged as they are (a diverged loss shows as a gap or a spike, never as silence)."""
         self.rec.set_time("step", sequence=int(step))
         for k, v in scalars.items():
-            if v is None:
-                continue
-            v = float(v)
-            if math.isfinite(v):
-                self.rec.log(k, rr.Scalars(v))
+            if v is not None:
+                self.rec.log(k, rr.Scalars(float(v)))
 
     def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
         """A `Rollout` or a TorchRL TensorDict `[B, T]` (a collector batch), when its turn comes (`rollout_every`).

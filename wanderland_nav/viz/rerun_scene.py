@@ -65,9 +65,9 @@ def log_navmesh(rec: rr.RecordingStream, navmesh, path: str = "world/navmesh", l
 
 
 def log_collision_mesh(rec: rr.RecordingStream, mesh_path: str | Path, path: str = "world/collision_mesh") -> None:
-    import trimesh
+    from wanderland_nav.scene.collision import load_collision_mesh
 
-    mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+    mesh = load_collision_mesh(mesh_path)
     rec.log(path, rr.Mesh3D(vertex_positions=np.asarray(mesh.vertices, np.float32),
                             triangle_indices=np.asarray(mesh.faces, np.int64),
                             vertex_normals=np.asarray(mesh.vertex_normals, np.float32),

@@ -1,0 +1,72 @@
+"""Issue 15 item 4: the expert never overwrites an episodes file this project did not write."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from pathlib import Path
+
+import pytest
+
+from wanderland_nav.episodes.generate import GeneratorSettings, generated_sibling, write_scene_episodes
+
+RELEASED = Path(__file__).parent / "data" / "wanderland_episodes.json"  # a released-style file (no generator block)
+FAST = GeneratorSettings(goal_images=False)
+
+
+@pytest.fixture(scope="module")
+def demo(prepared_demo_scene):
+    from planners import NavMesh
+    from wanderland_nav.scene import load_scene
+
+    scene = load_scene(prepared_demo_scene)
+    return scene, NavMesh.load(scene.navmesh_path)
+
+
+def test_generated_sibling_names():
+    assert generated_sibling(Path("/s/episodes.json")) == Path("/s/episodes.generated.json")
+    assert generated_sibling(Path("/s/val.json.gz")) == Path("/s/val.generated.json.gz")
+
+
+@pytest.mark.parametrize("released_bytes", ["released", "foreign"])
+def test_released_episodes_are_left_untouched_unless_forced(demo, tmp_path, caplog, released_bytes):
+    scene, nm = demo
+    out = tmp_path / "episodes.json"
+    if released_bytes == "released":
+        shutil.copy(RELEASED, out)
+    else:  # not even our schema: a newer release format, a hand-made file
+        out.write_text(json.dumps({"episodes": [{"id": 1}]}))
+    before = out.read_bytes()
+    with caplog.at_level(logging.INFO, logger="wanderland_nav.episodes.generate"):
+        eps, summary = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
+    side = tmp_path / "episodes.generated.json"
+    assert out.read_bytes() == before, "the released file must not change"
+    assert summary.out == str(side) and json.loads(side.read_text())["generator"]["name"] == "wanderland_nav.expert"
+    text = caplog.text
+    assert f"{out} was not written by wanderland_nav.expert" in text and f"episodes written to {side}" in text
+    assert f"wrote {side}" in summary.format()
+    # a rerun finds its own sibling up to date (and still leaves the released file alone)
+    _, again = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
+    assert again.skipped and again.out == str(side) and out.read_bytes() == before
+    # force=true is the only way to replace it
+    _, forced = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST, force=True)
+    assert forced.out == str(out) and json.loads(out.read_text())["generator"]["seed"] == 0
+
+
+def test_expert_entry_point_force_reaches_the_library(prepared_demo_scene, tmp_path):
+    from hydra import compose, initialize_config_dir
+
+    from wanderland_nav.expert import CONF_DIR, run
+
+    out = tmp_path / "episodes.json"
+    shutil.copy(RELEASED, out)
+    with initialize_config_dir(version_base="1.3", config_dir=str(CONF_DIR)):
+        cfg = compose("expert", overrides=[f"scenes={prepared_demo_scene}", f"out={out}", "num_episodes=2",
+                                           "generator.goal_images=false", "topdown=false", "progress=false",
+                                           "prepare=false"])
+    (s,) = run(cfg)
+    assert s.out == str(tmp_path / "episodes.generated.json") and out.read_bytes() == RELEASED.read_bytes()
+    cfg.force = True
+    (s,) = run(cfg)
+    assert s.out == str(out) and "generator" in json.loads(out.read_text())
