@@ -83,10 +83,18 @@ class SurfaceDistance:
         return out
 
 
-def surface_metrics(pred_mesh, ref_mesh, *, samples: int = 100_000, seed: int = 0,
-                    thresholds=THRESHOLDS) -> dict[str, float]:
-    """Accuracy / completeness at each threshold and the Chamfer distance between two meshes."""
+def surface_metrics(pred_mesh, ref_mesh, *, samples: int = 100_000, seed: int = 0, thresholds=THRESHOLDS,
+                    observed: np.ndarray | None = None, observed_radius: float = 0.3) -> dict[str, float]:
+    """Accuracy / completeness at each threshold and the Chamfer distance between two meshes.
+
+    `observed [P,3]`: points the capture actually saw (the grounded LiDAR cloud). When given, reference
+    samples farther than `observed_radius` from all of them are left out: a ground-truth mesh of the
+    whole block also holds roofs and back yards no capture could reconstruct, and completeness is
+    measured over what was seen (the observation mask of the DTU and Tanks-and-Temples protocols).
+    """
     pred_pts, ref_pts = sample_surface(pred_mesh, samples, seed), sample_surface(ref_mesh, samples, seed + 1)
+    if observed is not None and len(ref_pts):
+        ref_pts = ref_pts[cKDTree(np.asarray(observed, np.float64)).query(ref_pts, k=1)[0] <= observed_radius]
     if len(pred_pts) == 0 or len(ref_pts) == 0:
         raise ValueError(f"surface_metrics: empty mesh (pred {len(pred_mesh.faces)}, reference "
                          f"{len(ref_mesh.faces)} faces)")
@@ -111,6 +119,8 @@ def navmesh_metrics(pred_nm, ref_nm) -> dict[str, float]:
 def feasible_episodes(starts: np.ndarray, goals: np.ndarray, pred_nm, correction) -> np.ndarray:
     """`bool [E]`: grounded episode (start, goal) `[E,3]` scene-frame positions, mapped by `correction`
     (a `PoseCorrection`), snap onto the same island of `pred_nm`."""
+    if len(pred_nm.tris) == 0:  # nothing walkable: no episode survives
+        return np.zeros(len(starts), dtype=bool)
     s = pred_nm.island_of(correction.apply_points(starts))
     g = pred_nm.island_of(correction.apply_points(goals))
     return (s >= 0) & (s == g)

@@ -22,7 +22,7 @@ def degradation_report(grounded, degraded, *, episodes=(), samples: int = 100_00
 
     `episodes`: grounded `Episode`s (scene frame) whose feasibility in the degraded navmesh is counted.
     Surfaces are compared with the grounded collision mesh, and with the ground-truth mesh when the
-    grounded scene has one (the demo's `gt_mesh.ply`).
+    grounded scene has one (the demo's `gt_mesh.ply`; completeness over the part its LiDAR saw).
     """
     from planners import NavMesh
 
@@ -34,7 +34,8 @@ def degradation_report(grounded, degraded, *, episodes=(), samples: int = 100_00
     fig = surface_metrics(pred, _mesh(grounded.collision_mesh_path), samples=samples, seed=seed)
     row = {"scene": degraded.name, **{f"vs_lidar_mesh/{k}": v for k, v in fig.items()}}
     if grounded.gt_mesh_path is not None:
-        fig = surface_metrics(pred, _mesh(grounded.gt_mesh_path), samples=samples, seed=seed)
+        fig = surface_metrics(pred, _mesh(grounded.gt_mesh_path), samples=samples, seed=seed,
+                              observed=grounded.points)
         row.update({f"vs_gt_mesh/{k}": v for k, v in fig.items()})
     pred_nm, ref_nm = NavMesh.load(degraded.navmesh_path), NavMesh.load(grounded.navmesh_path)
     row.update(navmesh_metrics(pred_nm, ref_nm))

@@ -92,11 +92,11 @@ class DegradeSpec:
 PRESETS: dict[str, DegradeSpec] = {spec.name: spec for spec in (
     DegradeSpec("scale_0.8", scale=0.8),
     DegradeSpec("scale_1.2", scale=1.2),
-    DegradeSpec("drift", drift_m_at_100m=1.0, drift_deg_at_100m=3.0, pose_noise_m=0.03, pose_noise_deg=0.3),
+    DegradeSpec("drift", drift_m_at_100m=0.3, drift_deg_at_100m=1.0, pose_noise_m=0.01, pose_noise_deg=0.1),
     DegradeSpec("splat_mesh", geometry="splats"),
     DegradeSpec("holes", hole_rate_per_100m2=0.5, hole_radius=1.0, fragment_drop_rate=0.05),
-    DegradeSpec("video3dgs", scale=0.85, drift_m_at_100m=1.0, drift_deg_at_100m=3.0, pose_noise_m=0.03,
-                pose_noise_deg=0.3, geometry="splats"),
+    DegradeSpec("video3dgs", scale=0.9, drift_m_at_100m=0.3, drift_deg_at_100m=1.0, pose_noise_m=0.01,
+                pose_noise_deg=0.1, geometry="splats"),
 )}
 
 
