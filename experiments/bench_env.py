@@ -23,7 +23,7 @@ import torch
 def prepare(preset: str, root: Path, num_episodes: int):
     from planners import NavMesh
     from wanderland_nav.episodes.generate import write_scene_episodes
-    from wanderland_nav.pipeline import ensure_demo_scene
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.render import Gaussians
     from wanderland_nav.scene import load_scene
 

@@ -86,7 +86,7 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
 def bench_env(name: str, iterations: int, batch: int) -> dict:
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
-    from wanderland_nav.pipeline import ensure_demo_scene
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.rl.policy_env import lod_gaussians
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")

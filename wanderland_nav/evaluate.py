@@ -46,7 +46,7 @@ def resolve_scene(cfg: DictConfig):
     if cfg.scene_path is None and cfg.scene.get("demo", False):
         from planners import NavMesh
         from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-        from wanderland_nav.pipeline import ensure_demo_scene
+        from wanderland_nav.scene_preparation import ensure_demo_scene
 
         scene = ensure_demo_scene(Path(cfg.scene.path), seed=int(cfg.scene.get("seed", 0) or 0))
         episodes = Path(cfg.episodes) if cfg.episodes is not None else Path(scene.root) / "episodes.json"

@@ -103,11 +103,11 @@ def process_scene(plan: ScenePlan, *, num_episodes: int, seed: int, settings, fo
     from wanderland_nav.scene import load_scene
 
     if plan.demo:
-        from wanderland_nav.pipeline import ensure_demo_scene
+        from wanderland_nav.scene_preparation import ensure_demo_scene
 
         scene = ensure_demo_scene(plan.path, seed=plan.demo_seed, preset=plan.demo_preset)
     elif prepare:
-        from wanderland_nav.pipeline import prepare_scene
+        from wanderland_nav.scene_preparation import prepare_scene
 
         scene = prepare_scene(plan.path)
     else:

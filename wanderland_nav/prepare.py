@@ -1,7 +1,7 @@
 """`python -m wanderland_nav.prepare scene=demo`: make (demo) + prepare a scene, print a summary.
 
 Thin Hydra entry point: composes `conf/prepare.yaml`, converts the config into typed settings
-(`CollisionSettings`, `planners.NavMeshSettings`) and calls `pipeline.prepare_scene`.
+(`CollisionSettings`, `planners.NavMeshSettings`) and calls `scene_preparation.prepare_scene`.
 `scene=<folder>` (not a conf/scene/ option) is moved to `scene_path` before Hydra sees it.
 """
 
@@ -16,7 +16,7 @@ import hydra
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from wanderland_nav.pipeline import prepare_scene
+from wanderland_nav.scene_preparation import prepare_scene
 from wanderland_nav.scene.collision import CollisionSettings
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"

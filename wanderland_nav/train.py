@@ -3,7 +3,7 @@
 What one run does, top to bottom (each step skipped when its artefact already exists, so killing the
 run and starting the same command again resumes):
 
-1. scene: the demo scene is built and prepared on first use (`pipeline.ensure_demo_scene`); any other
+1. scene: the demo scene is built and prepared on first use (`scene_preparation.ensure_demo_scene`); any other
    scene folder is loaded; episodes are generated with EXPERT's generator when `episodes.json` is missing;
 2. the policy (`policies.make_policy`) and two `NavEnv`s shaped to it (camera size, frame history,
    number of waypoints): a training env on the `train` split and an evaluation env;
@@ -48,7 +48,7 @@ def resolve_scene(cfg: DictConfig):
 
     sc = cfg.scene
     if sc.get("demo", False):
-        from wanderland_nav.pipeline import ensure_demo_scene
+        from wanderland_nav.scene_preparation import ensure_demo_scene
 
         # training builds its own demo preset (tiny by default: CPU-trainable) beside the default one
         preset = str(cfg.get("demo_preset") or sc.get("preset") or "default")

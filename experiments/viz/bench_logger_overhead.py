@@ -92,7 +92,7 @@ def main() -> None:
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-    from wanderland_nav.pipeline import ensure_demo_scene
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.replay import _load_gaussians
     from wanderland_nav.viz.rerun_logger import RerunLogger
 

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from wanderland_nav.gsfit.init import InitSettings
 from wanderland_nav.gsfit.trainer import DensifySettings, FitConfig, Trainer, fit_config_from_dict, se3_exp
 from wanderland_nav.gsfit.views import load_view, scaled_intrinsics, split_cameras, target_size
-from wanderland_nav.scene.model import Camera, Scene
+from wanderland_nav.scene.types import Camera, Scene
 
 
 def _scene(root, n_cams=10, w=40, h=30, n_points=300):

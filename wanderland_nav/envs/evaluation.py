@@ -70,3 +70,17 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
     summary = aggregate_metrics(metrics)
     table = format_table({f"{name}/{g}": r for g, r in summary.items()})
     return EvaluationResult([m.to_dict() for m in metrics], summary, table)
+
+
+class PolicyActor(torch.nn.Module):
+    """Evaluation wrapper: a `NavPolicy`'s mean waypoints (or a Gaussian sample) written as `ACTION`."""
+
+    def __init__(self, policy, deterministic: bool = True):
+        super().__init__()
+        self.policy, self.deterministic = policy, deterministic
+
+    def forward(self, td):
+        return self.policy.select_action(td, deterministic=self.deterministic)
+
+    def reset(self):
+        self.policy.reset()

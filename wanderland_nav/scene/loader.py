@@ -24,7 +24,7 @@ import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
 from wanderland_nav.scene import colmap as C
-from wanderland_nav.scene.model import Camera, Scene, SceneFormatError
+from wanderland_nav.scene.types import Camera, Scene, SceneFormatError
 from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_ply_points, read_points_any
 from wanderland_nav.scene.transforms import (TransformsJson, _norm_name, read_scene_meta,
                                              read_transforms_json)

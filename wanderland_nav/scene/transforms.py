@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
-from wanderland_nav.scene.model import SceneFormatError
+from wanderland_nav.scene.types import SceneFormatError
 
 # OpenGL camera axes -> OpenCV camera axes (flip y and z), applied on the right of world_from_cam.
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from wanderland_nav import pipeline
-from wanderland_nav.pipeline import prepare_scene
+from wanderland_nav import scene_preparation
+from wanderland_nav.scene_preparation import prepare_scene
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.collision import CollisionSettings
 
@@ -144,6 +144,6 @@ def test_capture_positions_v2_lidar_poses(tmp_path, shared_data):
     poses = np.loadtxt(shared_data / "lidar/kitti/gicp_poses_kitti_format.txt")[:2]
     np.savetxt(root / "lidar/poses.txt", poses)
     s = prepare_scene(root, collision=CollisionSettings(voxel_size=0.3, crop_radius=10.0), bake_navmesh=False)
-    np.testing.assert_allclose(pipeline.capture_positions(s), poses.reshape(2, 3, 4)[:, :, 3])
+    np.testing.assert_allclose(scene_preparation.capture_positions(s), poses.reshape(2, 3, 4)[:, :, 3])
     mesh = trimesh.load(s.collision_mesh_path, process=False)
     assert np.linalg.norm(mesh.vertices[:, :2], axis=1).max() < 10.0 + np.abs(poses[:, [3, 7]]).max() + 0.5

@@ -22,7 +22,7 @@ import trimesh
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
 from wanderland_nav.scene.loader import load_scene
-from wanderland_nav.scene.model import Scene
+from wanderland_nav.scene.types import Scene
 
 log = logging.getLogger(__name__)
 
