@@ -173,7 +173,7 @@ def main() -> None:
     # (measured around those calls: an end-to-end difference is buried in the shared machine's noise)
     from wanderland_nav.envs import ExpertPolicy
     from wanderland_nav.envs.evaluation import run_evaluation
-    from wanderland_nav.rollouts import RecordingEnv, RolloutRecorder
+    from wanderland_nav.envs.recording import RecordingEnv, RolloutRecorder
 
     class TimedRecorder(RolloutRecorder):
         spent = 0.0

@@ -254,7 +254,7 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     # the training logger places a collector-style batch in the scene once a Rollout gave it the frame
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
-    lg = RerunLogger(tmp_path, scene=False, rollout_every=1)
+    lg = RerunLogger(tmp_path, scene=None, rollout_every=1)
     lg.log_rollout(th.stack(steps, 1), step=0, tag="train")  # no frame known yet: nav-frame space
     lg.log_rollout(ro, step=1, tag="eval")
     lg.log_rollout(th.stack(steps, 1), step=2, tag="train")

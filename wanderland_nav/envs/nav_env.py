@@ -43,14 +43,14 @@ class NavEnv(EnvBase):
     """Batched point-goal / image-goal / instruction navigation in a prepared scene.
 
     Args:
-        scene: a loaded `Scene` (needs `navmesh_path` and `gaussians_path` unless `navmesh` /
-            `gaussians` are given).
+        scene: a loaded `Scene` (its frame, name and root; nothing is read from its folder here).
         episodes: `Episode`s of that scene (scene frame), e.g. `load_episodes(path, split="val")`.
         batch_size: `[B]`, the number of agents stepped together.
         device: where observations, actions and the renderer live (the navmesh runs on CPU).
         config: `NavEnvConfig`.
-        navmesh, gaussians, renderer: already-loaded parts, to share them between envs or to test
-            with stand-ins; by default loaded from the scene folder / `wanderland_nav.render.render`.
+        navmesh: the loaded `planners.NavMesh` (or a stand-in with the same methods).
+        gaussians, renderer: the camera's splats and renderer (default `wanderland_nav.render.render`);
+            `gaussians` is required while `config.camera.enabled`.
         seed: seeds the episode sampler (also `set_seed`).
         asset_roots: folders that episodes' relative `goal_image` paths may be relative to (tried
             first; then the scene's episodes.json folder and the scene root).
@@ -66,7 +66,7 @@ class NavEnv(EnvBase):
         device: str | torch.device = "cpu",
         config: NavEnvConfig | None = None,
         *,
-        navmesh=None,
+        navmesh,
         gaussians=None,
         renderer: Renderer | None = None,
         seed: int = 0,
@@ -81,9 +81,13 @@ class NavEnv(EnvBase):
         self.scene = scene
         self.episodes = list(episodes)
         where = f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
-        self.navmesh = navmesh if navmesh is not None else _load_navmesh(scene)
-        if self.config.camera.enabled and (renderer is None or gaussians is None):
-            gaussians, renderer = _load_renderer(scene, gaussians, renderer, self.device)
+        self.navmesh = navmesh
+        if self.config.camera.enabled:
+            if gaussians is None:
+                raise ValueError(f"NavEnv({getattr(scene, 'name', 'scene')}): camera.enabled needs `gaussians` "
+                                 "(load them with wanderland_nav.compose, or set camera.enabled=false)")
+            if renderer is None:
+                from wanderland_nav.render import render as renderer
         self._R_ns = torch.as_tensor(np.asarray(scene.nav_from_scene), dtype=torch.float32)  # nav_from_scene [3, 3]
         cfg = self.config
         self.table = build_episode_table(
@@ -411,28 +415,3 @@ class NavEnv(EnvBase):
         euclid = (self.table.goal_position[ep] - p_nav).norm(dim=-1)
         return torch.where(torch.isfinite(g), g, euclid)
 
-
-def _load_navmesh(scene):
-    path = getattr(scene, "navmesh_path", None)
-    if path is None or not Path(path).is_file():
-        raise FileNotFoundError(
-            f"{getattr(scene, 'root', 'scene')}: navmesh.npz missing (Scene.navmesh_path={path}); "
-            f"prepare the scene first: python -m wanderland_nav.prepare scene=<path>"
-        )
-    from planners import NavMesh
-
-    return NavMesh.load(path)
-
-
-def _load_renderer(scene, gaussians, renderer, device):
-    from wanderland_nav.render import Gaussians, render
-
-    if gaussians is None:
-        path = getattr(scene, "gaussians_path", None)
-        if path is None or not Path(path).is_file():
-            raise FileNotFoundError(
-                f"{getattr(scene, 'root', 'scene')}: 3dgs.ply missing (Scene.gaussians_path={path}); the camera "
-                f"needs the scene's Gaussians (make or fit them: python -m wanderland_nav.fit)"
-            )
-        gaussians = Gaussians.load(path).to(device)
-    return gaussians, renderer if renderer is not None else render

@@ -37,6 +37,16 @@ _DEPTH_EXTS = (".npy", ".png", ".exr", ".tif", ".tiff", ".pfm")
 _QUAT_NORM_TOL = 1e-2
 
 
+#: files whose presence marks a folder as a scene folder (any one of them); extend here for new layouts
+SCENE_MARKERS = ("scene_meta.json", "navmesh.npz", "sparse", "transforms.json", "raw_pcd.ply", "3dgs.ply")
+
+
+def is_scene_folder(path) -> bool:
+    """Whether `path` is a scene folder (the one test every entry point uses, via `compose`)."""
+    p = Path(path)
+    return p.is_dir() and any((p / m).exists() for m in SCENE_MARKERS)
+
+
 def load_scene(path, up_axis: str | None = None) -> Scene:
     """Load the scene folder at `path` (v1 or v2 layout, detected from its files)."""
     root = Path(path)
