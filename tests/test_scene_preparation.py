@@ -120,15 +120,13 @@ def test_navmesh_rebakes_only_when_needed(demo_copy, monkeypatch):
 
 
 def test_prepare_entry_point(demo_copy, monkeypatch, capsys):
-    from hydra import compose, initialize_config_dir
+    from wanderland_nav.compose import compose_config, scene_overrides
+    from wanderland_nav.prepare import run
 
-    from wanderland_nav.prepare import CONF_DIR, rewrite_scene_override, run
-
-    assert rewrite_scene_override(["scene=demo", "scene=/x/y", "force=true"]) == \
-        ["scene=demo", "scene_path=/x/y", "force=true"]
-    with initialize_config_dir(version_base="1.3", config_dir=str(CONF_DIR)):
-        cfg = compose("prepare", overrides=[f"scene_path={demo_copy}", "navmesh_enabled=false",
-                                            "collision.voxel_size=0.3"])
+    assert scene_overrides(["scene=demo", "scene=/x/y", "force=true"]) == \
+        ["scene=demo", "scene=folder", "scene.path=/x/y", "force=true"]
+    cfg = compose_config("prepare", [f"scene={demo_copy}", "navmesh_enabled=false",
+                                     "navigation.collision.voxel_size=0.3"])
     rep = run(cfg)
     out = capsys.readouterr().out
     assert "collision mesh:" in out and "points" in out and "up axis -y" in out

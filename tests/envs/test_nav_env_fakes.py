@@ -234,3 +234,9 @@ def test_disabled_camera_never_renders_and_emits_zeros():
     check_env_specs(env)
     td = env.rollout(5, ExpertPolicy(env), break_when_any_done=False)
     assert renderer.calls == [] and not td["next", keys.RGB].any()
+
+
+def test_camera_without_gaussians_is_refused_by_name():
+    """NavEnv reads no files: a camera needs its Gaussians handed in."""
+    with pytest.raises(ValueError, match=r"NavEnv\(.*\): camera.enabled needs `gaussians`"):
+        NavEnv(FakeScene(), make_episodes(), batch_size=[1], config=small_config(), navmesh=FakeNavMesh())
