@@ -9,7 +9,7 @@ import pytest
 from wanderland_nav.compose import SCHEMAS, compose_config, scene_gaussians, typed_config
 from wanderland_nav.compose.scene import prepared_scene
 
-NAV_USERS = ("prepare", "train", "evaluate", "expert")
+NAV_USERS = ("prepare", "train", "evaluate", "make_episodes")
 
 
 @pytest.mark.parametrize("primary", NAV_USERS)
@@ -25,11 +25,11 @@ def test_no_other_config_file_sets_navmesh_or_collision_settings():
     assert owners == {"navigation/default.yaml"}
 
 
-@pytest.mark.parametrize("primary", ("prepare", "train", "evaluate", "expert", "fit"))
+@pytest.mark.parametrize("primary", ("prepare", "train", "evaluate", "make_episodes", "fit"))
 def test_scene_path_works_the_same_in_every_entry_point(primary):
     """`train scene=/path` used to fail with MissingConfigException."""
     c = typed_config(compose_config(primary, ["scene=/data/wanderland/scene_01"],
-                                    list_key="scenes" if primary == "expert" else None), SCHEMAS[primary])
+                                    list_key="scenes" if primary == "make_episodes" else None), SCHEMAS[primary])
     assert (c.scene.path, c.scene.demo, c.scene.name) == ("/data/wanderland/scene_01", False, "scene_01")
 
 

@@ -106,9 +106,9 @@ def test_camera_radius_is_respected(demo):
 
 def test_expert_entry_point_writes_episodes_and_topdown(prepared_demo_scene, tmp_path):
     from wanderland_nav.compose import compose_config
-    from wanderland_nav.expert import run
+    from wanderland_nav.make_episodes import run
 
-    cfg = compose_config("expert", [f"scene={prepared_demo_scene}", "num_episodes=3", "seed=0",
+    cfg = compose_config("make_episodes", [f"scene={prepared_demo_scene}", "num_episodes=3", "seed=0",
                                     f"out={tmp_path / 'ep.json'}", "navigation.prepare=false", "progress=false",
                                     "generator.goal_images=false", "generator.sampler.batch_size=64"],
                          list_key="scenes")

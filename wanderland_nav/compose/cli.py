@@ -2,7 +2,7 @@
 
 Why: `scene` is a Hydra config group, which rejects a path; a value that names no `conf/scene/`
 option becomes `scene=folder scene.path=<value>`, in all entry points alike. A list (several
-scenes, `expert` only) goes to the entry point's `list_key`.
+scenes, `make_episodes` only) goes to the entry point's `list_key`.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""`expert`'s composition: `scene=` (demo, folders, names, lists, folders of scenes) -> scene plans, and
+"""`make_episodes`'s composition: `scene=` (demo, folders, names, lists, folders of scenes) -> scene plans, and
 one plan -> its prepared scene, `episodes.json` and top-down picture."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from wanderland_nav.compose.schema import ExpertConfig, NavigationGroup, SceneGroup
+from wanderland_nav.compose.schema import MakeEpisodesConfig, NavigationGroup, SceneGroup
 from wanderland_nav.compose.scene import prepared_scene
 from wanderland_nav.scene.loader import SCENE_MARKERS, is_scene_folder
 
@@ -20,13 +20,13 @@ class ScenePlan:
     out: str | None = None  # episodes file; None: <scene folder>/episodes.json
 
 
-def _folder(path: Path, c: ExpertConfig) -> SceneGroup:
+def _folder(path: Path, c: MakeEpisodesConfig) -> SceneGroup:
     """A scene folder, keeping `scene.up_axis` when `scene=` named a folder (not the demo)."""
     base = c.scene if not c.scene.demo else SceneGroup()
     return dataclasses.replace(base, name=path.name, path=str(path), demo=False)
 
 
-def _plans_for(item: str, c: ExpertConfig) -> list[ScenePlan]:
+def _plans_for(item: str, c: MakeEpisodesConfig) -> list[ScenePlan]:
     if item == "demo":
         demo = c.scene if c.scene.demo else SceneGroup(path=str(Path(c.scenes_root) / "demo"), demo=True)
         return [ScenePlan(demo)]
@@ -44,7 +44,7 @@ def _plans_for(item: str, c: ExpertConfig) -> list[ScenePlan]:
     raise FileNotFoundError(f"scene={item}: no such scene folder (also looked in {c.scenes_root}/)")
 
 
-def resolve_scenes(c: ExpertConfig) -> list[ScenePlan]:
+def resolve_scenes(c: MakeEpisodesConfig) -> list[ScenePlan]:
     """Expand `scene` / `scenes` into scene plans, each with its episodes file."""
     items = c.scenes if c.scenes else ["demo" if c.scene.demo else c.scene.path]
     plans = [pl for item in items for pl in _plans_for(str(item), c)]

@@ -44,7 +44,7 @@ class SceneGroup:
 @dataclass
 class NavigationGroup:
     """`conf/navigation/default.yaml`: how a scene becomes walkable. Composed by prepare, train,
-    evaluate and expert alike, so the agent radius has one home."""
+    evaluate and make_episodes alike, so the agent radius has one home."""
 
     prepare: bool = True  # build/refresh collision mesh + navmesh with these settings before use
     collision: CollisionSettings = field(default_factory=CollisionSettings)
@@ -158,7 +158,7 @@ class EvaluateConfig:
     save_frames: bool = False
 
 
-# ------------------------------------------------------------------------------ prepare / expert
+# ------------------------------------------------------------------------------ prepare / make_episodes
 @dataclass
 class PrepareConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
@@ -168,7 +168,7 @@ class PrepareConfig:
 
 
 @dataclass
-class ExpertConfig:
+class MakeEpisodesConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
     scenes: Optional[List[str]] = None  # several scenes / a folder of scenes (scene=[a,b])
@@ -227,7 +227,7 @@ class FitRunConfig:
     fit: FitConfig = field(default_factory=FitConfig)
 
 
-SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "expert": ExpertConfig,
+SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
            "replay": ReplayConfig, "fit": FitRunConfig}
 
 

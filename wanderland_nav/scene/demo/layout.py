@@ -76,12 +76,6 @@ class Layout:
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
-    @property
-    def face_areas(self) -> np.ndarray:
-        v = self.vertices[self.faces]
-        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-
-
 def indoor_polygon() -> list[list[float]]:
     """Lobby interior (inside the outer walls), nav-frame xy, counter-clockwise."""
     x0, x1, y0, y1 = BUILDING

@@ -8,11 +8,11 @@ import pytest
 
 from wanderland_nav.compose import compose_config, scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import resolve_scenes
-from wanderland_nav.compose.schema import ExpertConfig
+from wanderland_nav.compose.schema import MakeEpisodesConfig
 
 
-def _cfg(overrides) -> ExpertConfig:
-    return typed_config(compose_config("expert", overrides, list_key="scenes"), ExpertConfig)
+def _cfg(overrides) -> MakeEpisodesConfig:
+    return typed_config(compose_config("make_episodes", overrides, list_key="scenes"), MakeEpisodesConfig)
 
 
 def test_rewrite_keeps_group_options_and_moves_paths():

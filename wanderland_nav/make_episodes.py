@@ -1,4 +1,4 @@
-"""Expert episodes for one or many scenes: `python -m wanderland_nav.expert scene=... num_episodes=N seed=S`.
+"""Episodes (with their expert shortest paths) for one or many scenes: `python -m wanderland_nav.make_episodes scene=... num_episodes=N seed=S`.
 
 `scene=` takes `demo` (built and prepared on first use), a scene folder, a name under `scenes_root`, a
 folder whose sub-folders are scenes, or a list of those (`scene=[a,b]`). Several scenes run in parallel
@@ -18,7 +18,7 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose import scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import process_scene, resolve_scenes
-from wanderland_nav.compose.schema import ExpertConfig
+from wanderland_nav.compose.schema import MakeEpisodesConfig
 
 
 def _worker(args):
@@ -31,7 +31,7 @@ def _worker(args):
 
 def run(cfg: DictConfig):
     """Everything `main` does, callable without Hydra's runtime (tests compose the config)."""
-    c: ExpertConfig = typed_config(cfg, ExpertConfig)
+    c: MakeEpisodesConfig = typed_config(cfg, MakeEpisodesConfig)
     plans = resolve_scenes(c)
     kw = dict(navigation=c.navigation, num_episodes=c.num_episodes, seed=c.seed, settings=c.generator, force=c.force,
               topdown=c.topdown, progress=c.progress)
@@ -47,7 +47,7 @@ def run(cfg: DictConfig):
     return summaries
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="expert")
+@hydra.main(version_base="1.3", config_path="../conf", config_name="make_episodes")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 
