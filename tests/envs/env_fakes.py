@@ -1,4 +1,4 @@
-"""Small stand-ins for the scene, navmesh and renderer that follow CONTRACTS.md exactly.
+"""Small stand-ins for the scene, navmesh and renderer that follow the NavEnv contract (ARCHITECTURE.md) exactly.
 
 They let the env's own logic (frames, kinematics, rewards, resets, metrics) be tested on a world
 whose answers are known in closed form: a convex rectangular room (nav frame x in [0, 10],
