@@ -51,8 +51,14 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
     episodes = load_episodes(episodes_path, split=split)
     if not episodes:
         raise ValueError(f"{episodes_path}: no episodes in split {split!r}")
+    goal_images = None
+    if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
+        from wanderland_nav.envs.episode_table import load_goal_images
+
+        goal_images = load_goal_images(episodes, [Path(episodes_path).parent, Path(scene.root)], env_cfg.camera.height,
+                                       env_cfg.camera.width, where=str(episodes_path))
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
-                   batch_size=int(batch_size), device=device, seed=seed, asset_roots=[Path(episodes_path).parent])
+                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)
 
 
 def load_navmesh(scene):

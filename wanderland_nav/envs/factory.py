@@ -6,7 +6,6 @@ once and hands them to every env it makes (training workers and the evaluation e
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Sequence
 
 import torch
@@ -17,7 +16,7 @@ from wanderland_nav.envs.nav_env import NavEnv
 
 def make_nav_env(scene, episodes: Sequence, navmesh, *, gaussians=None, config: NavEnvConfig | None = None,
                  batch_size: int = 1, device: str | torch.device = "cpu", seed: int = 0,
-                 asset_roots: Sequence[str | Path] = ()) -> NavEnv:
+                 goal_images: tuple[torch.Tensor, torch.Tensor] | None = None) -> NavEnv:
     """`NavEnv` with `batch_size` agents over `episodes` (a loaded list) of `scene`."""
     return NavEnv(scene, episodes, batch_size=[int(batch_size)], device=device, config=config, navmesh=navmesh,
-                  gaussians=gaussians, seed=seed, asset_roots=asset_roots)
+                  gaussians=gaussians, seed=seed, goal_images=goal_images)

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -32,7 +31,7 @@ from torchrl.envs import EnvBase
 from wanderland_nav import keys
 from wanderland_nav.envs.camera import AgentCamera, Renderer
 from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.envs.episode_table import build_episode_table, load_goal_images
+from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import plan_motion
 from wanderland_nav.envs.metrics import EpisodeMetrics, spl
 from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
@@ -52,8 +51,8 @@ class NavEnv(EnvBase):
         gaussians, renderer: the camera's splats and renderer (default `wanderland_nav.render.render`);
             `gaussians` is required while `config.camera.enabled`.
         seed: seeds the episode sampler (also `set_seed`).
-        asset_roots: folders that episodes' relative `goal_image` paths may be relative to (tried
-            first; then the scene's episodes.json folder and the scene root).
+        goal_images: `(images uint8 [E, H, W, 3], has bool [E])` for `goal_image="auto"`, loaded by the
+            caller (`episode_table.load_goal_images`); required when an episode names a goal view.
     """
 
     batch_locked = True
@@ -70,7 +69,7 @@ class NavEnv(EnvBase):
         gaussians=None,
         renderer: Renderer | None = None,
         seed: int = 0,
-        asset_roots: Sequence[str | Path] = (),
+        goal_images: tuple[torch.Tensor, torch.Tensor] | None = None,
     ):
         batch_size = torch.Size(batch_size)
         if len(batch_size) != 1 or batch_size[0] < 1:
@@ -95,7 +94,7 @@ class NavEnv(EnvBase):
         ).to(self.device)
         self.field = self.navmesh.distance_field(self.table.field_goals_scene)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
-        self._init_goal_images(where, [Path(p) for p in asset_roots])
+        self._init_goal_images(where, goal_images)
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
         all_eps = torch.arange(len(self.table), device=self.device)
@@ -112,16 +111,20 @@ class NavEnv(EnvBase):
 
     # ------------------------------------------------------------------ construction
 
-    def _init_goal_images(self, where: str, roots: list[Path]) -> None:
+    def _init_goal_images(self, where: str, loaded) -> None:
         c, mode = self.config.camera, self.config.goal_image
         E = len(self.table)
         if mode == "render":
             imgs, _ = self.camera.render(self.table.goal_position, self.table.goal_yaw)
             has = torch.full((E,), c.enabled, dtype=torch.bool, device=self.device)  # no camera, no goal view
-        elif mode == "auto":
-            ep_path = getattr(self.scene, "episodes_path", None)
-            roots = roots + [Path(p) for p in (ep_path and Path(ep_path).parent, getattr(self.scene, "root", None)) if p]
-            imgs, has = load_goal_images(self.episodes, roots, c.height, c.width, where=where)
+        elif mode == "auto" and loaded is not None:
+            imgs, has = loaded
+            if tuple(imgs.shape) != (E, c.height, c.width, 3) or tuple(has.shape) != (E,):
+                raise ValueError(f"{where}: goal_images {tuple(imgs.shape)} / has {tuple(has.shape)} do not match "
+                                 f"{E} episodes at {c.height}x{c.width}")
+        elif mode == "auto" and any(e.extras.get("goal_image") for e in self.episodes):
+            raise ValueError(f"{where}: episodes name goal_image files; load them with "
+                             "envs.episode_table.load_goal_images and pass goal_images= (NavEnv reads no files)")
         else:
             imgs = torch.zeros(E, c.height, c.width, 3, dtype=torch.uint8)
             has = torch.zeros(E, dtype=torch.bool)
