@@ -23,7 +23,7 @@ import torch
 def prepare(preset: str, root: Path, num_episodes: int):
     from planners import NavMesh
     from wanderland_nav.episodes.generate import write_scene_episodes
-    from wanderland_nav.pipeline import ensure_demo_scene
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.render import Gaussians
     from wanderland_nav.scene import load_scene
 
@@ -39,11 +39,12 @@ def prepare(preset: str, root: Path, num_episodes: int):
 def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True):
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.episodes import load_episodes
 
     cfg = NavEnvConfig()
     cfg.camera.width = cfg.camera.height = res
     cfg.camera.enabled = enabled
-    env = make_nav_env(scene, config=cfg, batch_size=B, device=device, navmesh=navmesh,
+    env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, device=device,
                        gaussians=gaussians.to(device), seed=0)
     policy = ExpertPolicy(env)
     td = env.reset()

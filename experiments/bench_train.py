@@ -84,10 +84,9 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
 
 
 def bench_env(name: str, iterations: int, batch: int) -> dict:
+    from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.envs import NavEnvConfig
-    from wanderland_nav.envs.factory import make_nav_env
-    from wanderland_nav.pipeline import ensure_demo_scene
-    from wanderland_nav.rl.policy_env import lod_gaussians
+    from wanderland_nav.scene_preparation import ensure_demo_scene
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")
     episodes = Path(scene.root) / "episodes.json"
@@ -99,7 +98,7 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
     cfg.camera.history = policy.context
     cfg.kinematics.num_waypoints = policy.num_waypoints
     cfg.termination.max_steps = 120
-    g = lod_gaussians(scene.gaussians_path, 10000)
+    g = scene_gaussians(scene, 10000)
     fpb = batch * 25
 
     class Quiet:
@@ -113,8 +112,9 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
             pass
 
     lg = Quiet()
-    tr = PPOTrainer(policy, lambda: make_nav_env(scene, config=cfg, batch_size=batch, episodes_path=episodes,
-                                                 split="train", gaussians=g),
+    env_fn = env_factory(scene, episodes, cfg, split="train", batch_size=batch, seed=0, device="cpu",
+                         navmesh=load_navmesh(scene), gaussians=g)
+    tr = PPOTrainer(policy, env_fn,
                     PPOConfig(total_frames=fpb * iterations, frames_per_batch=fpb, minibatch_size=fpb // 4),
                     logger=lg, progress=False)
     tr.train()

@@ -9,7 +9,7 @@ adding its architecture fields. The shared fields are the policy's I/O contract 
 * `freeze_encoder`: when the image encoders are trained (the one home of that choice).
 
 `env_requirements()` is the one declared answer to "what must the camera deliver": the env config is
-shaped from it (`rl.policy_env.shaped_env_config`), so a policy is trained and evaluated in the env it
+shaped from it (`compose.build.shaped_env_config`), so a policy is trained and evaluated in the env it
 was built for.
 """
 

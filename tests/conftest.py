@@ -52,7 +52,7 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
     """
     import shutil
 
-    from wanderland_nav.pipeline import prepare_scene
+    from wanderland_nav.scene_preparation import prepare_scene
     from wanderland_nav.scene.collision import CollisionSettings
 
     dst = tmp_path_factory.mktemp("prepared") / Path(tiny_demo_scene).name

@@ -38,10 +38,12 @@ def _compositions() -> list[tuple[str, list[str], list[Path]]]:
             if not (CONF / group).is_dir():
                 continue
             for opt in sorted((CONF / group).glob("*.yaml")):
-                jobs.append((primary, [f"{group}={opt.stem}"], [opt]))
+                extra = ["scene.path=/data/some_scene"] if (group, opt.stem) == ("scene", "folder") else []
+                jobs.append((primary, [f"{group}={opt.stem}", *extra], [opt]))
+        jobs.append((primary, ["debug=smoke"], [CONF / "debug_sizes" / f"smoke_{primary}.yaml"]))
     for e in EXPS:
         jobs.append(("train", [f"+exp={e}"], [CONF / "exp" / f"{e}.yaml"]))
-        jobs.append(("train", [f"+exp={e}", "debug=smoke"], [CONF / "exp" / f"{e}.yaml", CONF / "debug" / "smoke.yaml"]))
+        jobs.append(("train", [f"+exp={e}", "debug=smoke"], [CONF / "exp" / f"{e}.yaml"]))
     return jobs
 
 
@@ -57,13 +59,43 @@ def test_every_config_file_is_composed_somewhere():
 @pytest.mark.parametrize("primary,overrides", [(p, o) for p, o, _ in JOBS],
                          ids=[f"{p}:{','.join(o) or '-'}" for p, o, _ in JOBS])
 def test_compose(primary, overrides):
+    """Composes, and every key has the schema's type (an unknown key or a wrong type would raise)."""
+    from wanderland_nav.compose import SCHEMAS, typed_config
+
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(primary, overrides=overrides, return_hydra_config=False)
-    assert cfg is not None
+    assert type(typed_config(cfg, SCHEMAS[primary])) is SCHEMAS[primary]
+
+
+@pytest.mark.parametrize("primary", PRIMARIES)
+def test_typos_and_wrong_types_fail_at_compose_time_with_the_key_named(primary):
+    from omegaconf.errors import ConfigKeyError, ValidationError
+
+    from wanderland_nav.compose import SCHEMAS, typed_config
+
+    wrong_key = "max_points" if primary == "replay" else "scene.seed"  # replay has no scene group
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        typo = compose(primary, overrides=["+seeed=1"])
+        wrong = compose(primary, overrides=[f"{wrong_key}=many"])
+    with pytest.raises(ConfigKeyError, match="full_key: seeed"):
+        typed_config(typo, SCHEMAS[primary])
+    with pytest.raises(ValidationError, match=f"full_key: {wrong_key}"):
+        typed_config(wrong, SCHEMAS[primary])
+
+
+@pytest.mark.parametrize("primary", PRIMARIES)
+def test_debug_smoke_shrinks_every_entry_point(primary):
+    """`debug=smoke` selects conf/debug_sizes/smoke_<entry>.yaml, and that file changes the config."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        full = compose(primary)
+        smoke = compose(primary, overrides=["debug=smoke"])
+    assert full != smoke
+    if primary == "fit":
+        assert smoke.fit.iterations <= 50 and smoke.fit.max_width <= 32
 
 
 def test_exp_files_start_with_package_global_and_leave_sizes_alone():
-    smoke = yaml.safe_load((CONF / "debug" / "smoke.yaml").read_text())
+    smoke = yaml.safe_load((CONF / "debug_sizes" / "smoke_train.yaml").read_text())
 
     def leaves(d, prefix=""):
         for k, v in d.items():
@@ -90,7 +122,7 @@ _SMOKE_RUNS: dict[str, Path] = {}   # exp -> run_dir, so later tests reuse a run
 
 def smoke_cfg(exp: str, scene: Path, run_dir: Path):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("train", overrides=[f"+exp={exp}", "debug=smoke", f"scene.path={scene}", "scene.demo=false",
+        return compose("train", overrides=[f"+exp={exp}", "debug=smoke", "scene=folder", f"scene.path={scene}",
                                            f"run_dir={run_dir}", "render.max_gaussians=2000"])
 
 
@@ -128,8 +160,9 @@ def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
         run(smoke_cfg("mbra_bc", scene, run_dir))
     ck = run_dir / "checkpoints" / "last.pt"
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        ecfg = compose("evaluate", overrides=[f"scene_path={scene}", f"checkpoints=[{ck},{ck}]", "num_episodes=2",
-                                              "batch_size=2", f"out={tmp_path}", "progress=false"])
+        ecfg = compose("evaluate", overrides=["scene=folder", f"scene.path={scene}", f"checkpoints=[{ck},{ck}]",
+                                              "num_episodes=2", "batch_size=2", f"out={tmp_path}", "progress=false",
+                                              "navigation.collision.voxel_size=0.25"])
     rows = evaluate(ecfg)
     assert list(rows) == [f"{run_dir.parent.name}/run", str(ck)]
     a, b = rows.values()

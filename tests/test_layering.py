@@ -1,73 +1,123 @@
-"""DESIGN.md's one-way imports: keys/geometry -> scene, render, planners -> envs -> train.
+"""The part table of ARCHITECTURE.md, enforced: every file belongs to a part, and imports only the parts
+its row allows (checked statically with ast, so code paths no other test runs are covered too).
 
-Checked statically (ast), so a violation fails even in code paths the other tests never run.
+The parametrisation is generated from the table: add a part there, and it is checked here.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-
-# module prefix -> prefixes it must never import (third-party or first-party)
-FORBIDDEN = {
-    "wanderland_nav/keys.py": ["numpy", "wanderland_nav", "planners", "policies", "trimesh", "torchrl", "rerun", "hydra"],
-    "wanderland_nav/geometry.py": ["wanderland_nav", "planners", "policies", "trimesh", "torchrl", "rerun", "hydra"],
-    "wanderland_nav/scene": ["wanderland_nav.envs", "wanderland_nav.viz", "policies", "torchrl", "rerun", "hydra"],
-    "wanderland_nav/render": ["wanderland_nav.scene", "wanderland_nav.envs", "wanderland_nav.viz", "planners", "policies",
-                              "trimesh", "torchrl", "rerun", "hydra"],
-    "planners": ["wanderland_nav.envs", "wanderland_nav.viz", "wanderland_nav.render", "policies", "torchrl", "rerun", "hydra"],
-    "wanderland_nav/envs": ["wanderland_nav.viz", "policies", "rerun", "hydra"],
-    "wanderland_nav/recon": ["wanderland_nav.envs", "wanderland_nav.viz", "policies", "planners", "torchrl", "rerun",
-                             "hydra", "matplotlib"],
-    "policies": ["wanderland_nav.scene", "wanderland_nav.render", "wanderland_nav.envs", "wanderland_nav.viz",
-                 "planners", "rerun", "hydra", "torchvision"],
-}
-RERUN_ONLY_IN = "wanderland_nav/viz"
+FIRST_PARTY = ("wanderland_nav", "planners", "policies")
+#: third-party library -> the parts that may import it
+RESTRICTED = {"hydra": {"compose", "entry points"}, "omegaconf": {"compose", "entry points"},
+              "rerun": {"viz"}, "matplotlib": {"viz"}, "torchrl": {"envs", "rl"}}
 
 
-def _imports(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text(), filename=str(path))
+def parse_parts(text: str) -> dict[str, tuple[list[str], set[str]]]:
+    """`{part: ([paths], {allowed parts})}` from the table between the `parts:begin/end` markers."""
+    block = text.split("<!-- parts:begin -->")[1].split("<!-- parts:end -->")[0]
+    parts = {}
+    for line in block.strip().splitlines()[2:]:  # skip the header and the |---| row
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        name, paths, _, allowed = cells
+        parts[name] = (re.findall(r"[\w./]+", paths.replace("`", " ")),
+                       {a.strip() for a in allowed.split(",") if a.strip()})
+    return parts
+
+
+PARTS = parse_parts((REPO / "ARCHITECTURE.md").read_text())
+
+
+def part_of(rel: str) -> str | None:
+    """The part owning repo-relative path `rel` (longest matching path wins)."""
+    best, best_len = None, -1
+    for name, (paths, _) in PARTS.items():
+        for p in paths:
+            if (rel == p or rel.startswith(p.rstrip("/") + "/")) and len(p) > best_len:
+                best, best_len = name, len(p)
+    return best
+
+
+def module_part(module: str) -> str | None:
+    """The part of an imported first-party module (`wanderland_nav.envs.config` -> envs)."""
+    base = module.replace(".", "/")
+    for rel in (f"{base}.py", f"{base}/__init__.py"):
+        if (REPO / rel).is_file():
+            return part_of(rel)
+    return None
+
+
+def imported_modules(source: str) -> set[str]:
+    """Absolute imports; `from pkg import mod` counts as `pkg.mod` when `mod` is a module."""
     names = set()
-    for node in ast.walk(tree):
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.add(node.module)
+            for a in node.names:
+                sub = f"{node.module}.{a.name}"
+                if module_part(sub) is not None and (REPO / (sub.replace(".", "/") + ".py")).is_file():
+                    names.add(sub)
     return names
 
 
-def _files(prefix: str) -> list[Path]:
-    p = REPO / prefix
-    return [p] if p.is_file() else sorted(p.rglob("*.py"))
-
-
-@pytest.mark.parametrize("prefix", sorted(FORBIDDEN))
-def test_imports_flow_one_way(prefix):
-    for f in _files(prefix):
-        for name in _imports(f):
-            for bad in FORBIDDEN[prefix]:
-                assert not (name == bad or name.startswith(bad + ".")), f"{f.relative_to(REPO)} imports {name}"
-
-
-def test_rerun_is_imported_only_in_viz():
-    for top in ("wanderland_nav", "planners", "policies"):
-        for f in (REPO / top).rglob("*.py"):
-            rel = f.relative_to(REPO).as_posix()
-            if rel.startswith(RERUN_ONLY_IN):
+def violations(rel: str, source: str) -> list[str]:
+    """What `source`, as file `rel`, imports against the table."""
+    part = part_of(rel)
+    allowed = PARTS[part][1] | {part}
+    bad = []
+    for m in sorted(imported_modules(source)):
+        top = m.split(".")[0]
+        if top in FIRST_PARTY:
+            target = module_part(m)
+            if m == "wanderland_nav" and target == "package":
                 continue
-            assert not any(n == "rerun" or n.startswith("rerun.") for n in _imports(f)), f"{rel} imports rerun"
+            if target is None or (target not in allowed and target != "package"):
+                bad.append(f"{rel} ({part}) imports {m} ({target})")
+        elif top in RESTRICTED and part not in RESTRICTED[top]:
+            bad.append(f"{rel} ({part}) imports {m} (only {sorted(RESTRICTED[top])} may)")
+    return bad
 
 
-def test_hydra_only_in_entry_points():
-    entry = {"prepare", "expert", "train", "evaluate", "replay", "fit", "recon_eval"}
-    for top in ("wanderland_nav", "planners", "policies"):
-        for f in (REPO / top).rglob("*.py"):
-            rel = f.relative_to(REPO)
-            if rel.parent.as_posix() == "wanderland_nav" and rel.stem in entry:
-                continue
-            assert not any(n == "hydra" or n.startswith("hydra.") or n == "omegaconf" or n.startswith("omegaconf.")
-                           for n in _imports(f)), f"{rel} imports hydra/omegaconf (only entry points may)"
+def _files(part: str) -> list[Path]:
+    return [f for top in FIRST_PARTY for f in sorted((REPO / top).rglob("*.py"))
+            if part_of(f.relative_to(REPO).as_posix()) == part]
+
+
+def test_every_file_belongs_to_a_part():
+    orphans = [f.relative_to(REPO).as_posix() for top in FIRST_PARTY for f in (REPO / top).rglob("*.py")
+               if part_of(f.relative_to(REPO).as_posix()) is None]
+    assert orphans == [], f"files in no part of ARCHITECTURE.md: {orphans}"
+
+
+def test_table_names_only_existing_parts_and_paths():
+    for name, (paths, allowed) in PARTS.items():
+        assert allowed <= set(PARTS), f"{name}: may import unknown part(s) {sorted(allowed - set(PARTS))}"
+        for p in paths:
+            assert (REPO / p).exists(), f"{name}: {p} does not exist"
+
+
+@pytest.mark.parametrize("part", sorted(PARTS))
+def test_part_imports_only_what_its_row_allows(part):
+    files = _files(part)
+    assert files, f"part {part} has no files"
+    bad = [v for f in files for v in violations(f.relative_to(REPO).as_posix(), f.read_text())]
+    assert bad == [], "\n".join(bad)
+
+
+@pytest.mark.parametrize("rel,source", [
+    ("wanderland_nav/envs/sneaky.py", "from wanderland_nav.compose import env_factory\n"),
+    ("wanderland_nav/rollouts.py", "def f():\n    from wanderland_nav.envs.camera import AgentCamera\n"),
+    ("planners/sneaky.py", "import wanderland_nav.scene.loader\n"),
+    ("wanderland_nav/rl/sneaky.py", "from omegaconf import DictConfig\n"),
+    ("policies/sneaky.py", "from wanderland_nav import geometry\n"),
+])
+def test_an_upward_import_is_caught(rel, source):
+    assert violations(rel, source), f"{rel}: the checker missed {source!r}"

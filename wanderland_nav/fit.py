@@ -1,14 +1,13 @@
-"""`python -m wanderland_nav.fit`: fit 3D Gaussians to a scene's posed images, evaluate, export.
+"""`python -m wanderland_nav.fit [scene=<demo | folder>]`: 3D Gaussians fitted to a scene's posed images,
+evaluated on train / interpolated / extrapolated views, exported.
 
-Thin Hydra entry point: compose conf/fit.yaml, load (or generate) the scene, hand a typed
-`FitConfig` to `gsfit.Trainer`, then print and save the interpolated/extrapolated table.
-Reruns resume from `<out_dir>/checkpoints/latest.pt` (resume=false starts over).
+The run folder (default `outputs/fit/<scene>/<run hash>`) resumes from `checkpoints/latest.pt`
+(resume=false starts over); a folder made by another configuration or scene is refused.
 
 Examples:
     python -m wanderland_nav.fit                                  # demo scene, defaults
     python -m wanderland_nav.fit fit.iterations=500 fit.max_width=96
-    python -m wanderland_nav.fit fit.use_depth=false out_dir=outputs/fit/no_depth
-    python -m wanderland_nav.fit scene.path=/data/wanderland/scene_01 scene.demo=false
+    python -m wanderland_nav.fit scene=/data/wanderland/scene_01 fit.use_depth=false
 """
 
 from __future__ import annotations
@@ -20,119 +19,37 @@ import os
 # wall with spinning and 0.08 s with passive waiting. Users can still set the variable themselves.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-import json
-import logging
-import math
-import time
-from pathlib import Path
+import sys  # noqa: E402
 
-import hydra
-from omegaconf import DictConfig, OmegaConf
+import hydra  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
 
-from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-
-log = logging.getLogger(__name__)
+from wanderland_nav.compose import scene_overrides, typed_config  # noqa: E402
+from wanderland_nav.compose.fitting import fit_parts  # noqa: E402
+from wanderland_nav.compose.schema import FitRunConfig  # noqa: E402
 
 
-def json_safe(obj):
-    """Non-finite floats -> None (JSON has no NaN/inf; a view with no valid pixels gives NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    return obj
+def run_fit(cfg) -> dict:
+    """Everything `main` does, on a composed config or a plain dict (tests)."""
+    from wanderland_nav.gsfit.run import fit_scene
 
-
-def load_fit_scene(scene_cfg: dict):
-    """The configured scene; the demo is generated on first use (idempotent)."""
-    from wanderland_nav.scene import load_scene, make_demo_scene
-
-    path = Path(scene_cfg["path"])
-    if scene_cfg.get("demo", False):
-        make_demo_scene(path, seed=int(scene_cfg.get("seed", 0)), preset=scene_cfg.get("preset", "default"))
-    return load_scene(path, up_axis=scene_cfg.get("up_axis"))
-
-
-def run_fit(cfg: dict) -> dict:
-    """Everything `main` does, on a plain dict (so tests can call it without Hydra)."""
-    from wanderland_nav.gsfit.evaluate import evaluate_splits, format_table
-    from wanderland_nav.gsfit.trainer import Trainer, fit_config_from_dict
-
-    import torch
-
-    if cfg.get("threads"):
-        torch.set_num_threads(int(cfg["threads"]))
-    t_start, c_start = time.perf_counter(), time.process_time()
-    fit_cfg = fit_config_from_dict(cfg["fit"])
-    out_dir = Path(cfg["out_dir"])
-    scene = load_fit_scene(cfg["scene"])
-    metrics_log = out_dir / "train_log.jsonl"
-    log_every = int(cfg.get("log_every", 0))
-    rows: list[str] = []
-
-    rerun_logger = None
-    if cfg.get("rerun", False):
-        from wanderland_nav.viz.rerun_logger import RerunLogger  # rerun only behind viz/
-
-        rerun_logger = RerunLogger(out_dir, rollout_every=0, file_name="fit.rrd")
-
-    def log_fn(step, scalars, _images):
-        if log_every and step % log_every == 0:
-            rows.append(json.dumps(json_safe({"step": step, **scalars})))
-            if rerun_logger is not None:
-                rerun_logger.log_scalars({f"fit/{k}": v for k, v in scalars.items()}, step)
-
-    t0, c0 = time.perf_counter(), time.process_time()
-    trainer = Trainer(scene, out_dir, fit_cfg, log_fn=log_fn, resume=bool(cfg.get("resume", True)),
-                      progress=bool(cfg.get("progress", True)))
-    timing = {"setup_s": time.perf_counter() - t0, "setup_cpu_s": time.process_time() - c0}
-    results: dict = {"config": cfg}
-    lpips = None
-    lp = cfg.get("lpips") or {}
-    if lp.get("backbone_path") and lp.get("lin_path"):
-        from wanderland_nav.gsfit.lpips import LPIPS
-
-        lpips = LPIPS.from_files(lp["backbone_path"], lp["lin_path"])
-    else:
-        log.info("LPIPS off: set lpips.backbone_path and lpips.lin_path to local AlexNet/LPIPS weights")
-    if cfg.get("evaluate", True):
-        results["init"] = evaluate_splits(trainer.initial_gaussians, trainer.views, trainer.render_fn,
-                                          background=fit_cfg.background, lpips=lpips,
-                                          max_views=cfg.get("eval_max_views"))
-    t0, c0 = time.perf_counter(), time.process_time()
-    results["train"] = trainer.train()
-    timing["train_s"], timing["train_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
-    if rows:
-        prev = metrics_log.read_text() if metrics_log.exists() else ""
-        atomic_write_text(metrics_log, prev + "\n".join(rows) + "\n")
-    ply = out_dir / "3dgs.ply"
-    if cfg.get("export_to_scene", False):
-        results["exported_to"] = str(trainer.export(Path(scene.root) / "3dgs.ply"))
-    if cfg.get("evaluate", True):
-        results["fitted"] = evaluate_splits(trainer.gaussians().detach(), trainer.views, trainer.render_fn,
-                                            background=fit_cfg.background, lpips=lpips,
-                                          max_views=cfg.get("eval_max_views"))
-        table = format_table({"LiDAR init": results["init"], "fitted": results["fitted"]},
-                             splits=("train", "interp", "extrap"))
-        results["table"] = table
-        atomic_write_text(out_dir / "eval_table.md", table + "\n")
-        print(table)
-    timing["total_s"], timing["total_cpu_s"] = time.perf_counter() - t_start, time.process_time() - c_start
-    results["timing"] = timing
-    atomic_write_json(out_dir / "results.json", json_safe(results))
-    if rerun_logger is not None:
-        rerun_logger.close()
-    log.info("wrote %s (%d Gaussians) after %d steps; timing %s", ply, results["train"]["num_gaussians"],
-             results["train"]["step"], {k: round(v, 1) for k, v in timing.items()})
+    c: FitRunConfig = typed_config(cfg, FitRunConfig)
+    config = OmegaConf.to_container(OmegaConf.create(cfg), resolve=True)
+    scene, out_dir, identity, lpips, scalar_logger = fit_parts(c, config)
+    results = fit_scene(scene, out_dir, c.fit, record={"config": config, "identity": identity}, resume=c.resume,
+                        evaluate=c.evaluate, eval_max_views=c.eval_max_views, lpips=lpips, log_every=c.log_every,
+                        scalar_logger=scalar_logger, progress=c.progress,
+                        export_to=scene.root / "3dgs.ply" if c.export_to_scene else None)
+    if scalar_logger is not None:
+        scalar_logger.close()
     return results
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="fit")
 def main(cfg: DictConfig) -> None:
-    run_fit(OmegaConf.to_container(cfg, resolve=True))
+    run_fit(cfg)
 
 
 if __name__ == "__main__":
+    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
     main()

@@ -27,10 +27,8 @@ STOCHASTIC = {"drift", "holes", "video3dgs"}
 
 
 def _prepare(path):
-    try:
-        from wanderland_nav.scene_preparation import prepare_scene
-    except ImportError:  # before the composition-root rename
-        from wanderland_nav.pipeline import prepare_scene
+    from wanderland_nav.scene_preparation import prepare_scene
+
     return prepare_scene(path)
 
 

@@ -90,10 +90,9 @@ def main() -> None:
 
     from planners import NavMesh
     from wanderland_nav.envs import NavEnvConfig
-    from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-    from wanderland_nav.pipeline import ensure_demo_scene
-    from wanderland_nav.replay import _load_gaussians
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")
@@ -101,7 +100,7 @@ def main() -> None:
     if not episodes.is_file():
         write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), episodes, num_episodes=40, seed=0,
                              settings=GeneratorSettings(goal_images=False))
-    g = _load_gaussians(scene, 10000)  # training's LOD subset
+    g = scene_gaussians(scene, 10000)  # training's LOD subset
     cfg = NavEnvConfig()
     cfg.camera.height = cfg.camera.width = 64
     cfg.camera.history = 2
@@ -109,9 +108,8 @@ def main() -> None:
     cfg.termination.max_steps = 120
     fpb = args.batch * args.steps
 
-    def env_fn():
-        return make_nav_env(scene, config=cfg, batch_size=args.batch, episodes_path=episodes, split=None,
-                            gaussians=g)
+    env_fn = env_factory(scene, episodes, cfg, split=None, batch_size=args.batch, seed=0, device="cpu",
+                         navmesh=load_navmesh(scene), gaussians=g)
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_rerun_"))
     variants = {
@@ -173,7 +171,7 @@ def main() -> None:
     # (measured around those calls: an end-to-end difference is buried in the shared machine's noise)
     from wanderland_nav.envs import ExpertPolicy
     from wanderland_nav.envs.evaluation import run_evaluation
-    from wanderland_nav.rollouts import RecordingEnv, RolloutRecorder
+    from wanderland_nav.envs.recording import RecordingEnv, RolloutRecorder
 
     class TimedRecorder(RolloutRecorder):
         spent = 0.0

@@ -1,4 +1,4 @@
-"""Small stand-ins for the scene, navmesh and renderer that follow CONTRACTS.md exactly.
+"""Small stand-ins for the scene, navmesh and renderer that follow the NavEnv contract (ARCHITECTURE.md) exactly.
 
 They let the env's own logic (frames, kinematics, rewards, resets, metrics) be tested on a world
 whose answers are known in closed form: a convex rectangular room (nav frame x in [0, 10],
@@ -139,7 +139,7 @@ def make_episodes():
     ]
 
 
-def make_env(B=2, config=None, episodes=None, seed=0, **kw):
+def make_env(B=2, config=None, episodes=None, seed=0, goal_images=None, **kw):
     from wanderland_nav.envs import NavEnv, NavEnvConfig
 
     if config is None:
@@ -148,4 +148,5 @@ def make_env(B=2, config=None, episodes=None, seed=0, **kw):
         config.camera.history = 3
         config.instruction_length = 32
     return NavEnv(FakeScene(**kw), episodes if episodes is not None else make_episodes(), batch_size=[B],
-                  config=config, navmesh=FakeNavMesh(), gaussians=object(), renderer=FakeRenderer(), seed=seed)
+                  config=config, navmesh=FakeNavMesh(), gaussians=object(), renderer=FakeRenderer(), seed=seed,
+                  goal_images=goal_images)

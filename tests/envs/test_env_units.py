@@ -16,20 +16,27 @@ from wanderland_nav.envs.rewards import ProgressState, navigation_reward, termin
 # ---------------------------------------------------------------- config
 
 
-def test_config_from_dict_is_strict_and_typed():
-    c = NavEnvConfig.from_dict({"camera": {"width": 64, "height": 48}, "reward": {"success_reward": 5}})
+def test_env_config_is_strict_and_typed_at_compose_time():
+    from omegaconf.errors import ConfigKeyError, ValidationError
+
+    from wanderland_nav.compose import typed_config
+
+    def typed(d):
+        return typed_config(d, NavEnvConfig)
+
+    c = typed({"camera": {"width": 64, "height": 48}, "reward": {"success_reward": 5}})
     assert (c.camera.width, c.camera.height, c.reward.success_reward) == (64, 48, 5.0)
-    assert isinstance(c.reward.success_reward, float)
-    with pytest.raises(ValueError, match=r"camera: unknown field\(s\) \['widht'\]"):
-        NavEnvConfig.from_dict({"camera": {"widht": 64}})
-    with pytest.raises(ValueError, match="kinematics.substeps: expected an integer"):
-        NavEnvConfig.from_dict({"kinematics": {"substeps": 2.5}})
+    assert isinstance(c.reward.success_reward, float) and c.camera.background == (0.0, 0.0, 0.0)
+    with pytest.raises(ConfigKeyError, match=r"Key 'widht' not in 'CameraConfig'[\s\S]*full_key: camera.widht"):
+        typed({"camera": {"widht": 64}})
+    with pytest.raises(ValidationError, match="full_key: kinematics.substeps"):
+        typed({"kinematics": {"substeps": 2.5}})
     with pytest.raises(ValueError, match="kinematics.action_mode"):
-        NavEnvConfig.from_dict({"kinematics": {"action_mode": "teleport"}})
+        typed({"kinematics": {"action_mode": "teleport"}})
     with pytest.raises(ValueError, match="camera.hfov_deg"):
-        NavEnvConfig.from_dict({"camera": {"hfov_deg": 200}})  # pinhole cannot see 200 deg
-    assert NavEnvConfig.from_dict({"camera": {"hfov_deg": 200, "camera_model": "fisheye"}}).camera.hfov_deg == 200
-    assert NavEnvConfig.from_dict(NavEnvConfig().to_dict()) == NavEnvConfig()
+        typed({"camera": {"hfov_deg": 200}})  # pinhole cannot see 200 deg
+    assert typed({"camera": {"hfov_deg": 200, "camera_model": "fisheye"}}).camera.hfov_deg == 200
+    assert typed(NavEnvConfig().to_dict()) == NavEnvConfig()
 
 
 # ---------------------------------------------------------------- kinematics

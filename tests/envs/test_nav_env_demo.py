@@ -25,6 +25,12 @@ def demo_parts(prepared_demo_scene, demo_episodes):
     return scene, NavMesh.load(scene.navmesh_path), g[idx]  # a subsample keeps the CPU renderer fast
 
 
+def _episodes(scene):
+    from wanderland_nav.episodes import load_episodes
+
+    return load_episodes(scene.episodes_path)
+
+
 def blind_config(**term):
     c = NavEnvConfig()
     c.camera.enabled = False
@@ -36,20 +42,20 @@ def blind_config(**term):
 
 def test_expert_reaches_quality_bar_and_random_does_not(demo_parts, demo_episodes):
     scene, navmesh, _ = demo_parts
-    env = make_nav_env(scene, config=blind_config(max_steps=300), batch_size=8, navmesh=navmesh)
+    env = make_nav_env(scene, _episodes(scene), navmesh, config=blind_config(max_steps=300), batch_size=8)
     res = run_evaluation(env, ExpertPolicy(env), name="expert")
     o = res.summary["overall"]
     assert o["episodes"] == len(env.table) and o["SR"] >= 0.95 and o["SPL"] >= 0.9, res.table
     for r in res.records:  # the expert's travelled length never beats the geodesic by more than the goal radius
         assert r["path_length"] >= r["shortest_length"] - float(env.table.goal_radius.max()) - 0.3
-    env2 = make_nav_env(scene, config=blind_config(max_steps=60), batch_size=8, navmesh=navmesh)
+    env2 = make_nav_env(scene, _episodes(scene), navmesh, config=blind_config(max_steps=60), batch_size=8)
     rnd = run_evaluation(env2, RandomPolicy(env2.action_spec, seed=0), name="random").summary["overall"]
     assert rnd["SR"] < 0.95 * o["SR"] and rnd["SPL"] < 0.9
 
 
 def test_frames_and_distances_match_the_navmesh(demo_parts, demo_episodes):
     scene, navmesh, _ = demo_parts
-    env = make_nav_env(scene, config=blind_config(), batch_size=4, navmesh=navmesh)
+    env = make_nav_env(scene, _episodes(scene), navmesh, config=blind_config(), batch_size=4)
     td = env.reset()
     ep = td[keys.EPISODE_INDEX].flatten()
     starts = np.stack([env.episodes[i].start_position for i in ep.tolist()])
@@ -75,7 +81,7 @@ def test_specs_and_real_rendering(demo_parts, demo_episodes):
     c = NavEnvConfig()
     c.camera.width, c.camera.height, c.camera.history, c.camera.depth = 24, 16, 2, True
     c.termination.max_steps = 50
-    env = make_nav_env(scene, config=c, batch_size=2, navmesh=navmesh, gaussians=gaussians)
+    env = make_nav_env(scene, _episodes(scene), navmesh, config=c, batch_size=2, gaussians=gaussians)
     check_env_specs(env)
     td = env.reset()
     rgb = td[keys.RGB]

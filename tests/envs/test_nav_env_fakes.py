@@ -193,9 +193,14 @@ def test_goal_images_from_files_and_rendered(tmp_path):
     img[..., 0] = 200
     (tmp_path / "goal_images").mkdir()
     Image.fromarray(img).save(tmp_path / "goal_images" / "g0.png")
+    from wanderland_nav.envs.episode_table import load_goal_images
+
     eps = make_episodes()
     eps[1].extras["goal_image"] = "goal_images/g0.png"
-    env = make_env(B=4, config=small_config(), episodes=eps, root=tmp_path)
+    with pytest.raises(ValueError, match="episodes name goal_image files; load them"):
+        make_env(B=4, config=small_config(), episodes=eps)  # NavEnv itself reads no files
+    env = make_env(B=4, config=small_config(), episodes=eps,
+                   goal_images=load_goal_images(eps, [tmp_path], 16, 16, where="test"))
     env.config.episode_order = "iterate"
     env.set_seed(0)
     td = env.reset()
@@ -203,7 +208,7 @@ def test_goal_images_from_files_and_rendered(tmp_path):
     assert td[keys.GOAL_IMAGE].shape == (4, 16, 16, 3) and td[keys.GOAL_IMAGE][1, ..., 0].float().mean() == 200
     eps[2].extras["goal_image"] = "goal_images/missing.png"
     with pytest.raises(FileNotFoundError, match=r"episodes\[2\].goal_image"):
-        make_env(B=1, config=small_config(), episodes=eps, root=tmp_path)
+        load_goal_images(eps, [tmp_path], 16, 16, where="test")
     c = small_config()
     c.goal_image = "render"
     env = make_env(B=2, config=c)
@@ -235,3 +240,9 @@ def test_disabled_camera_never_renders_and_emits_zeros():
     check_env_specs(env)
     td = env.rollout(5, ExpertPolicy(env), break_when_any_done=False)
     assert renderer.calls == [] and not td["next", keys.RGB].any()
+
+
+def test_camera_without_gaussians_is_refused_by_name():
+    """NavEnv reads no files: a camera needs its Gaussians handed in."""
+    with pytest.raises(ValueError, match=r"NavEnv\(.*\): camera.enabled needs `gaussians`"):
+        NavEnv(FakeScene(), make_episodes(), batch_size=[1], config=small_config(), navmesh=FakeNavMesh())

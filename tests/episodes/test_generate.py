@@ -105,14 +105,13 @@ def test_camera_radius_is_respected(demo):
 
 
 def test_expert_entry_point_writes_episodes_and_topdown(prepared_demo_scene, tmp_path):
-    from hydra import compose, initialize_config_dir
+    from wanderland_nav.compose import compose_config
+    from wanderland_nav.make_episodes import run
 
-    from wanderland_nav.expert import CONF_DIR, rewrite_scene_override, run
-
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose(config_name="expert", overrides=rewrite_scene_override([
-            f"scene={prepared_demo_scene}", "num_episodes=3", "seed=0", f"out={tmp_path / 'ep.json'}",
-            "prepare=false", "progress=false", "generator.goal_images=false", "sampler.batch_size=64"]))
+    cfg = compose_config("make_episodes", [f"scene={prepared_demo_scene}", "num_episodes=3", "seed=0",
+                                    f"out={tmp_path / 'ep.json'}", "navigation.prepare=false", "progress=false",
+                                    "generator.goal_images=false", "generator.sampler.batch_size=64"],
+                         list_key="scenes")
     (summary,) = run(cfg)
     assert summary.kept == len(load_episodes(tmp_path / "ep.json")) >= 1
     png = tmp_path / "ep_topdown.png"

@@ -12,9 +12,9 @@ from scipy.spatial.transform import Rotation
 
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.gsfit.init import InitSettings
-from wanderland_nav.gsfit.trainer import DensifySettings, FitConfig, Trainer, fit_config_from_dict, se3_exp
+from wanderland_nav.gsfit.trainer import DensifySettings, FitConfig, Trainer, se3_exp
 from wanderland_nav.gsfit.views import load_view, scaled_intrinsics, split_cameras, target_size
-from wanderland_nav.scene.model import Camera, Scene
+from wanderland_nav.scene.types import Camera, Scene
 
 
 def _scene(root, n_cams=10, w=40, h=30, n_points=300):
@@ -72,21 +72,20 @@ def test_se3_exp_matches_rotvec_and_has_gradient():
     assert torch.allclose(z.grad, torch.tensor([[0.0, 0, -1, 0, 0, 0]]))
 
 
-def test_fit_config_from_dict_and_hydra_compose():
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
+def test_fit_config_is_typed_at_compose_time():
+    """The hand-written dict validator is gone: `compose.typed_config` names the bad key and builds FitConfig."""
+    from omegaconf.errors import ConfigKeyError
 
+    from wanderland_nav.compose import compose_config, typed_config
+    from wanderland_nav.compose.schema import FitRunConfig
 
-    with pytest.raises(ValueError, match="unknown key"):
-        fit_config_from_dict({"iterationz": 3})
-    with pytest.raises(ValueError, match="fit.lr"):
-        fit_config_from_dict({"lr": {"mean": 1.0}})
-    import wanderland_nav
-
-    conf_dir = str((__import__("pathlib").Path(wanderland_nav.__file__).parents[1] / "conf").resolve())
-    with initialize_config_dir(version_base="1.3", config_dir=conf_dir):
-        c = compose("fit", overrides=["fit.frozen_means=true", "fit.lr.sh_dc=1e-3"])
-    cfg = fit_config_from_dict(OmegaConf.to_container(c, resolve=True)["fit"])
+    with pytest.raises(ConfigKeyError, match="fit.iterationz"):
+        typed_config({"fit": {"iterationz": 3}}, FitRunConfig)
+    with pytest.raises(ConfigKeyError, match="fit.lr.mean"):
+        typed_config({"fit": {"lr": {"mean": 1.0}}}, FitRunConfig)
+    c = typed_config(compose_config("fit", ["fit.frozen_means=true", "fit.lr.sh_dc=1e-3"]), FitRunConfig)
+    cfg = c.fit
+    assert isinstance(cfg, FitConfig) and cfg.background == (0.0, 0.0, 0.0)
     assert cfg.frozen_means and cfg.lr.sh_dc == 1e-3 and cfg.lr.means == 1.6e-5 and cfg.loss.depth == 0.02
 
 

@@ -14,7 +14,7 @@ from PIL import Image
 from wanderland_nav.gsfit.undistort import distort_points, undistort_points
 from wanderland_nav.gsfit import views
 from wanderland_nav.gsfit.views import load_view
-from wanderland_nav.scene.model import Camera
+from wanderland_nav.scene.types import Camera
 
 W, H = 96, 72
 K = np.array([[60.0, 0.0, 48.0], [0.0, 58.0, 36.0], [0.0, 0.0, 1.0]])

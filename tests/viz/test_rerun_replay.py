@@ -15,8 +15,8 @@ import pytest
 import rerun as rr
 import torch
 
-from wanderland_nav.rollouts import (Rollout, RolloutFormatError, RolloutRecorder, RecordingEnv, load_rollout,
-                                     record_evaluation, save_rollout)
+from wanderland_nav.envs.recording import RecordingEnv, RolloutRecorder, record_evaluation
+from wanderland_nav.rollouts import Rollout, RolloutFormatError, load_rollout, save_rollout
 
 H = W = 24  # tiny camera: the CPU renderer stays well inside the test budget
 
@@ -38,12 +38,13 @@ def env(demo):
     """2 agents, a 24 x 24 camera with depth, episodes cut at 4 steps (the CPU renderer is the cost)."""
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.episodes import load_episodes
 
     scene, navmesh, g = demo
     c = NavEnvConfig()
     c.camera.width, c.camera.height, c.camera.history, c.camera.depth = W, H, 1, True
     c.termination.max_steps = 4
-    return make_nav_env(scene, config=c, batch_size=2, navmesh=navmesh, gaussians=g)
+    return make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=c, batch_size=2, gaussians=g)
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +53,8 @@ def recorded(env, tmp_path_factory):
     from wanderland_nav.envs import ExpertPolicy
 
     path = tmp_path_factory.mktemp("ro") / "expert.npz"
-    res, ro = record_evaluation(env, ExpertPolicy(env), path, num_episodes=3, name="expert", frames=True)
+    res, ro = record_evaluation(env, ExpertPolicy(env), path, num_episodes=3, name="expert", frames=True,
+                                episodes_path=env.scene.episodes_path)
     return env, res, ro, path
 
 
@@ -200,11 +202,13 @@ def test_replay_entry_point_rerenders_frames_and_expert_paths(recorded, demo, tm
 
 
 def test_rerun_logger_protocol(recorded, tmp_path):
-    from wanderland_nav.rl.loggers import Logger, make_logger
+    from wanderland_nav.compose import make_logger
+    from wanderland_nav.compose.schema import LoggerGroup
+    from wanderland_nav.rl.loggers import Logger
     from wanderland_nav.viz.rerun_logger import scalar_entities
 
-    _, _, ro, _ = recorded
-    lg = make_logger("rerun", tmp_path, rollout_every=2, max_agents=1)
+    env, _, ro, _ = recorded
+    lg = make_logger(LoggerGroup(kind="rerun", rollout_every=2, max_agents=1), tmp_path, env.scene)
     assert isinstance(lg, Logger)
     for i in range(3):
         lg.log_scalars({"losses/objective": 0.5 - 0.1 * i, "eval/SR": 0.25 * i, "eval/NE": float("nan"),
@@ -231,7 +235,7 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     import torch as th
 
     from wanderland_nav.envs import ExpertPolicy
-    from wanderland_nav.rollouts import rollout_from_tensordict
+    from wanderland_nav.envs.recording import rollout_from_tensordict
 
     pol = ExpertPolicy(env)
     rec = RolloutRecorder(env)
@@ -256,7 +260,7 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     # the training logger places a collector-style batch in the scene once a Rollout gave it the frame
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
-    lg = RerunLogger(tmp_path, scene=False, rollout_every=1)
+    lg = RerunLogger(tmp_path, scene=None, rollout_every=1)
     lg.log_rollout(th.stack(steps, 1), step=0, tag="train")  # no frame known yet: nav-frame space
     lg.log_rollout(ro, step=1, tag="eval")
     lg.log_rollout(th.stack(steps, 1), step=2, tag="train")

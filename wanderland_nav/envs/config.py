@@ -1,8 +1,8 @@
 """Typed configuration of `NavEnv`: every physical constant and reward coefficient in one place.
 
-The env never reads a DictConfig (CONTRACTS.md): Hydra entry points turn `conf/env/*.yaml` into a
-`NavEnvConfig` with `NavEnvConfig.from_dict`, which rejects unknown or mistyped fields with an error
-naming the field, so a typo in a YAML file cannot silently fall back to a default.
+The env never reads a DictConfig (ARCHITECTURE.md): `wanderland_nav.compose.typed_config` turns
+`conf/env/*.yaml` into a `NavEnvConfig`, rejecting unknown or mistyped keys with the key named, so a
+typo in a YAML file cannot silently fall back to a default; `validate` checks the ranges.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")
@@ -123,52 +123,6 @@ class NavEnvConfig:
             if not ok:
                 raise ValueError(f"NavEnvConfig.{name}: invalid value {value!r}")
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | None, *, source: str = "env config") -> "NavEnvConfig":
-        """Build from a plain nested mapping (e.g. `OmegaConf.to_container(cfg.env)`), strictly."""
-        return _build(cls, dict(d or {}), source)
-
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-
-def _build(cls, d: dict[str, Any], where: str):
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(d) - set(fields))
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {unknown}; known: {sorted(fields)}")
-    kwargs = {}
-    for name, value in d.items():
-        default = getattr(cls(), name)
-        if dataclasses.is_dataclass(default):
-            if not isinstance(value, Mapping):
-                raise ValueError(f"{where}.{name}: expected a mapping, got {value!r}")
-            kwargs[name] = _build(type(default), dict(value), f"{where}.{name}")
-        else:
-            kwargs[name] = _coerce(value, default, f"{where}.{name}")
-    try:
-        return cls(**kwargs)
-    except ValueError as e:
-        raise ValueError(f"{where}: {e}") from None
-
-
-def _coerce(value: Any, default: Any, where: str) -> Any:
-    """Check a YAML scalar against the default's type (ints may stand for floats)."""
-    if value is None or default is None:
-        return value
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"{where}: expected true/false, got {value!r}")
-        return value
-    if isinstance(default, (int, float)) and not isinstance(value, bool) and isinstance(value, (int, float)):
-        if isinstance(default, int) and not isinstance(default, bool) and isinstance(value, float):
-            if not value.is_integer():
-                raise ValueError(f"{where}: expected an integer, got {value!r}")
-            return int(value)
-        return type(default)(value)
-    if isinstance(default, tuple) and isinstance(value, (list, tuple)):
-        return tuple(float(v) for v in value)
-    if isinstance(default, str) and isinstance(value, str):
-        return value
-    raise ValueError(f"{where}: expected {type(default).__name__}, got {value!r}")
 

@@ -8,11 +8,15 @@ policy the records therefore do not depend on the batch size.
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
+from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table
 
 
@@ -70,3 +74,31 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
     summary = aggregate_metrics(metrics)
     table = format_table({f"{name}/{g}": r for g, r in summary.items()})
     return EvaluationResult([m.to_dict() for m in metrics], summary, table)
+
+
+class PolicyActor(torch.nn.Module):
+    """Evaluation wrapper: a `NavPolicy`'s mean waypoints (or a Gaussian sample) written as `ACTION`."""
+
+    def __init__(self, policy, deterministic: bool = True):
+        super().__init__()
+        self.policy, self.deterministic = policy, deterministic
+
+    def forward(self, td):
+        return self.policy.select_action(td, deterministic=self.deterministic)
+
+    def reset(self):
+        self.policy.reset()
+
+
+def write_results(out: Path, name: str, res: EvaluationResult, meta: dict) -> None:
+    """`eval_<name>.csv` (one row per episode, tagged with `meta["identity"]["hash"]` as `run`) and
+    `eval_<name>.json` (summary, records, meta), atomically."""
+    run = meta["identity"]["hash"]
+    records = [{**r, "run": run} for r in res.records]
+    buf = io.StringIO()
+    if records:
+        w = csv.DictWriter(buf, fieldnames=list(records[0]))
+        w.writeheader()
+        w.writerows(records)
+    atomic_write_text(Path(out) / f"eval_{name}.csv", buf.getvalue())
+    atomic_write_json(Path(out) / f"eval_{name}.json", {"summary": res.summary, "meta": meta, "episodes": records})

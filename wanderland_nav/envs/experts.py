@@ -2,7 +2,7 @@
 
 `waypoints_along_path` is the one definition of "what a perfect waypoint policy outputs" (K points
 ahead along a path, in the body frame): `ExpertPolicy` below, the BC labels (`rl.bc.ExpertPaths`) and
-the expert replay (`rollouts.expert_rollout`, via `waypoints_along_samples`) all call it.
+the expert replay (`envs.recording.expert_rollout`, via `waypoints_along_samples`) all call it.
 
 The expert is privileged: it reads `AGENT_POSITION`, `AGENT_YAW`, `EPISODE_INDEX` and
 `STEP_COUNT` and follows each episode's expert path (the navmesh shortest path stored as

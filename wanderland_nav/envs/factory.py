@@ -1,12 +1,12 @@
-"""Build a `NavEnv` from a prepared scene folder: the one place that knows where the files are.
+"""`make_nav_env`: a `NavEnv` from parts already loaded (a picklable target for collector workers).
 
-Entry points (evaluate, train) call `make_nav_env(path, ...)`; tests and studies that already hold
-the parts call `NavEnv(...)` directly. Missing artefacts raise with the command that makes them.
+Nothing here reads disk: `wanderland_nav.compose` loads the scene, episodes, navmesh and Gaussians
+once and hands them to every env it makes (training workers and the evaluation env alike).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import Sequence
 
 import torch
 
@@ -14,34 +14,9 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.nav_env import NavEnv
 
 
-def make_nav_env(
-    scene,
-    *,
-    config: NavEnvConfig | None = None,
-    batch_size: int = 1,
-    device: str | torch.device = "cpu",
-    episodes_path: str | Path | None = None,
-    split: str | None = None,
-    seed: int = 0,
-    navmesh=None,
-    gaussians=None,
-) -> NavEnv:
-    """`scene`: a `Scene` or a scene folder. Episodes: `episodes_path` (default the scene's
-    episodes.json), restricted to `split` (default `config.split`; None keeps all)."""
-    from wanderland_nav.episodes import load_episodes
-    from wanderland_nav.scene import load_scene
-
-    config = config if config is not None else NavEnvConfig()
-    if isinstance(scene, (str, Path)):
-        scene = load_scene(scene)
-    path = Path(episodes_path) if episodes_path is not None else getattr(scene, "episodes_path", None)
-    if path is None or not Path(path).is_file():
-        raise FileNotFoundError(
-            f"{scene.root}: episodes.json missing ({path}); make it with: python -m wanderland_nav.expert scene={scene.root}"
-        )
-    split = split if split is not None else config.split
-    episodes = load_episodes(path, split=split)
-    if not episodes:
-        raise ValueError(f"{path}: no episodes in split {split!r}")
+def make_nav_env(scene, episodes: Sequence, navmesh, *, gaussians=None, config: NavEnvConfig | None = None,
+                 batch_size: int = 1, device: str | torch.device = "cpu", seed: int = 0,
+                 goal_images: tuple[torch.Tensor, torch.Tensor] | None = None) -> NavEnv:
+    """`NavEnv` with `batch_size` agents over `episodes` (a loaded list) of `scene`."""
     return NavEnv(scene, episodes, batch_size=[int(batch_size)], device=device, config=config, navmesh=navmesh,
-                  gaussians=gaussians, seed=seed, asset_roots=[Path(path).parent])
+                  gaussians=gaussians, seed=seed, goal_images=goal_images)

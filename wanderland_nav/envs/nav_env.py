@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import time
 from collections import defaultdict
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -33,7 +32,7 @@ from torchrl.envs import EnvBase
 from wanderland_nav import keys
 from wanderland_nav.envs.camera import AgentCamera, Renderer
 from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.envs.episode_table import build_episode_table, load_goal_images
+from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.metrics import EpisodeMetrics, spl
 from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
@@ -46,17 +45,17 @@ class NavEnv(EnvBase):
     """Batched point-goal / image-goal / instruction navigation in a prepared scene.
 
     Args:
-        scene: a loaded `Scene` (needs `navmesh_path` and `gaussians_path` unless `navmesh` /
-            `gaussians` are given).
+        scene: a loaded `Scene` (its frame, name and root; nothing is read from its folder here).
         episodes: `Episode`s of that scene (scene frame), e.g. `load_episodes(path, split="val")`.
         batch_size: `[B]`, the number of agents stepped together.
         device: where observations, actions and the renderer live (the navmesh runs on CPU).
         config: `NavEnvConfig`.
-        navmesh, gaussians, renderer: already-loaded parts, to share them between envs or to test
-            with stand-ins; by default loaded from the scene folder / `wanderland_nav.render.render`.
+        navmesh: the loaded `planners.NavMesh` (or a stand-in with the same methods).
+        gaussians, renderer: the camera's splats and renderer (default `wanderland_nav.render.render`);
+            `gaussians` is required while `config.camera.enabled`.
         seed: seeds the episode sampler (also `set_seed`).
-        asset_roots: folders that episodes' relative `goal_image` paths may be relative to (tried
-            first; then the scene's episodes.json folder and the scene root).
+        goal_images: `(images uint8 [E, H, W, 3], has bool [E])` for `goal_image="auto"`, loaded by the
+            caller (`episode_table.load_goal_images`); required when an episode names a goal view.
     """
 
     batch_locked = True
@@ -69,11 +68,11 @@ class NavEnv(EnvBase):
         device: str | torch.device = "cpu",
         config: NavEnvConfig | None = None,
         *,
-        navmesh=None,
+        navmesh,
         gaussians=None,
         renderer: Renderer | None = None,
         seed: int = 0,
-        asset_roots: Sequence[str | Path] = (),
+        goal_images: tuple[torch.Tensor, torch.Tensor] | None = None,
     ):
         batch_size = torch.Size(batch_size)
         if len(batch_size) != 1 or batch_size[0] < 1:
@@ -84,9 +83,13 @@ class NavEnv(EnvBase):
         self.scene = scene
         self.episodes = list(episodes)
         where = f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
-        self.navmesh = navmesh if navmesh is not None else _load_navmesh(scene)
-        if self.config.camera.enabled and (renderer is None or gaussians is None):
-            gaussians, renderer = _load_renderer(scene, gaussians, renderer, self.device)
+        self.navmesh = navmesh
+        if self.config.camera.enabled:
+            if gaussians is None:
+                raise ValueError(f"NavEnv({getattr(scene, 'name', 'scene')}): camera.enabled needs `gaussians` "
+                                 "(load them with wanderland_nav.compose, or set camera.enabled=false)")
+            if renderer is None:
+                from wanderland_nav.render import render as renderer
         self._R_ns = torch.as_tensor(np.asarray(scene.nav_from_scene), dtype=torch.float32)  # nav_from_scene [3, 3]
         cfg = self.config
         self.table = build_episode_table(
@@ -94,7 +97,7 @@ class NavEnv(EnvBase):
         ).to(self.device)
         self.field = self.navmesh.distance_field(self.table.field_goals_scene)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
-        self._init_goal_images(where, [Path(p) for p in asset_roots])
+        self._init_goal_images(where, goal_images)
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
         all_eps = torch.arange(len(self.table), device=self.device)
@@ -111,16 +114,20 @@ class NavEnv(EnvBase):
 
     # ------------------------------------------------------------------ construction
 
-    def _init_goal_images(self, where: str, roots: list[Path]) -> None:
+    def _init_goal_images(self, where: str, loaded) -> None:
         c, mode = self.config.camera, self.config.goal_image
         E = len(self.table)
         if mode == "render":
             imgs, _ = self.camera.render(self.table.goal_position, self.table.goal_yaw)
             has = torch.full((E,), c.enabled, dtype=torch.bool, device=self.device)  # no camera, no goal view
-        elif mode == "auto":
-            ep_path = getattr(self.scene, "episodes_path", None)
-            roots = roots + [Path(p) for p in (ep_path and Path(ep_path).parent, getattr(self.scene, "root", None)) if p]
-            imgs, has = load_goal_images(self.episodes, roots, c.height, c.width, where=where)
+        elif mode == "auto" and loaded is not None:
+            imgs, has = loaded
+            if tuple(imgs.shape) != (E, c.height, c.width, 3) or tuple(has.shape) != (E,):
+                raise ValueError(f"{where}: goal_images {tuple(imgs.shape)} / has {tuple(has.shape)} do not match "
+                                 f"{E} episodes at {c.height}x{c.width}")
+        elif mode == "auto" and any(e.extras.get("goal_image") for e in self.episodes):
+            raise ValueError(f"{where}: episodes name goal_image files; load them with "
+                             "envs.episode_table.load_goal_images and pass goal_images= (NavEnv reads no files)")
         else:
             imgs = torch.zeros(E, c.height, c.width, 3, dtype=torch.uint8)
             has = torch.zeros(E, dtype=torch.bool)
@@ -434,28 +441,3 @@ class NavEnv(EnvBase):
         euclid = (self.table.goal_position[ep] - p_nav).norm(dim=-1)
         return torch.where(torch.isfinite(g), g, euclid)
 
-
-def _load_navmesh(scene):
-    path = getattr(scene, "navmesh_path", None)
-    if path is None or not Path(path).is_file():
-        raise FileNotFoundError(
-            f"{getattr(scene, 'root', 'scene')}: navmesh.npz missing (Scene.navmesh_path={path}); "
-            f"prepare the scene first: python -m wanderland_nav.prepare scene=<path>"
-        )
-    from planners import NavMesh
-
-    return NavMesh.load(path)
-
-
-def _load_renderer(scene, gaussians, renderer, device):
-    from wanderland_nav.render import Gaussians, render
-
-    if gaussians is None:
-        path = getattr(scene, "gaussians_path", None)
-        if path is None or not Path(path).is_file():
-            raise FileNotFoundError(
-                f"{getattr(scene, 'root', 'scene')}: 3dgs.ply missing (Scene.gaussians_path={path}); the camera "
-                f"needs the scene's Gaussians (make or fit them: python -m wanderland_nav.fit)"
-            )
-        gaussians = Gaussians.load(path).to(device)
-    return gaussians, renderer if renderer is not None else render

@@ -166,6 +166,71 @@ class EndpointSampler:
 
     # ----------------------------------------------------------------- main loop
 
+    def _round(self, K: int, rng: np.random.Generator, rej: Counter):
+        """One round of `K` candidate pairs through every batched filter (rejections counted in `rej`).
+
+        -> None when none survives, else (starts `[K, 3]`, goals `[K, 3]`, start islands `[K]`,
+        euclidean `[K]`, geodesic `[K]`, goal radius `[K]`, surviving indices `[n]`)."""
+        s = self.s
+        pts, on = self.draw_points(2 * K, rng)  # [2K, 3], [2K]
+        keep_u = rng.random(K)  # drawn every round so the stream does not depend on filters
+        pick_u = rng.random(K)
+        near = self.near_camera(pts) & on
+        isl = np.full(2 * K, -1, dtype=np.int64)  # [2K]; off-mesh draws never reach the planner
+        if on.any():
+            isl[on] = np.asarray(self.navmesh.island_of(pts[on], max_distance=0.05)).astype(np.int64)
+        st, isl_s, m = pts[:K], isl[:K], near[:K] & (isl[:K] >= 0)
+        rej["off_mesh"] += int((~on[:K]).sum())
+        # pair every start with a random goal from the second half ON ITS ISLAND (scenes split into
+        # many islands would otherwise waste most pairs): goals grouped by island, index by pick_u
+        g_ok = near[K:] & (isl[K:] >= 0)
+        g_idx = K + np.flatnonzero(g_ok)
+        order = np.argsort(isl[g_idx], kind="stable")
+        g_idx, g_isl = g_idx[order], isl[g_idx][order]
+        lo = np.searchsorted(g_isl, isl_s, side="left")
+        cnt = np.searchsorted(g_isl, isl_s, side="right") - lo
+        rej["not_near_camera"] += int((~m & on[:K]).sum())
+        has_goal = m & (cnt > 0)
+        rej["different_island"] += int((m & ~has_goal).sum())
+        m = has_goal
+        choice = g_idx[np.clip(lo + np.floor(pick_u * cnt).astype(np.int64), 0, max(len(g_idx) - 1, 0))] \
+            if len(g_idx) else np.zeros(K, dtype=np.int64)
+        go = pts[np.where(m, choice, K)]  # [K, 3]; rows with m False are ignored below
+        idx = np.flatnonzero(m)
+        if idx.size == 0:
+            return None
+        # geodesic >= euclidean: pairs already too far apart in a straight line skip the planner
+        euc = np.linalg.norm(go - st, axis=-1)
+        far = m & (euc > s.max_geodesic)
+        rej["too_long"] += int(far.sum())
+        m &= ~far
+        idx = np.flatnonzero(m)
+        geo = np.full(K, np.inf)
+        if idx.size:
+            geo[idx] = torch.as_tensor(
+                self.navmesh.geodesic_distance(st[idx], go[idx])).double().cpu().numpy()
+        fin = np.isfinite(geo)
+        rej["unreachable"] += int((m & ~fin).sum())
+        m &= fin
+        short = m & (geo < s.min_geodesic)
+        rej["too_short"] += int(short.sum())
+        m &= ~short
+        long_ = m & (geo > s.max_geodesic)
+        rej["too_long"] += int(long_.sum())
+        m &= ~long_
+        ratio = geo / np.maximum(euc, 1e-6)
+        straight = m & (ratio < s.min_ratio) & (keep_u >= s.straight_keep_prob)
+        rej["too_straight"] += int(straight.sum())
+        m &= ~straight
+        radius = s.goal_radius_for(np.where(np.isfinite(geo), geo, 0.0))
+        reach = m & (euc <= radius)
+        rej["goal_in_reach"] += int(reach.sum())
+        m &= ~reach
+        cand = np.flatnonzero(m)
+        if cand.size == 0:
+            return None
+        return st, go, isl_s, euc, geo, radius, cand
+
     def sample(self, num: int, rng: np.random.Generator, progress=None) -> SampledPairs:
         """Accept up to `num` pairs; stops early after `max_rounds` rounds (see `rejections`)."""
         s = self.s
@@ -179,63 +244,10 @@ class EndpointSampler:
             # a round costs one batched planner call over its pairs: draw fewer near the end
             K = min(s.batch_size, max(32, 16 * (num - len(acc_s))))
             drawn += K
-            pts, on = self.draw_points(2 * K, rng)  # [2K, 3], [2K]
-            keep_u = rng.random(K)  # drawn every round so the stream does not depend on filters
-            pick_u = rng.random(K)
-            near = self.near_camera(pts) & on
-            isl = np.full(2 * K, -1, dtype=np.int64)  # [2K]; off-mesh draws never reach the planner
-            if on.any():
-                isl[on] = np.asarray(self.navmesh.island_of(pts[on], max_distance=0.05)).astype(np.int64)
-            st, isl_s, m = pts[:K], isl[:K], near[:K] & (isl[:K] >= 0)
-            rej["off_mesh"] += int((~on[:K]).sum())
-            # pair every start with a random goal from the second half ON ITS ISLAND (scenes split into
-            # many islands would otherwise waste most pairs): goals grouped by island, index by pick_u
-            g_ok = near[K:] & (isl[K:] >= 0)
-            g_idx = K + np.flatnonzero(g_ok)
-            order = np.argsort(isl[g_idx], kind="stable")
-            g_idx, g_isl = g_idx[order], isl[g_idx][order]
-            lo = np.searchsorted(g_isl, isl_s, side="left")
-            cnt = np.searchsorted(g_isl, isl_s, side="right") - lo
-            rej["not_near_camera"] += int((~m & on[:K]).sum())
-            has_goal = m & (cnt > 0)
-            rej["different_island"] += int((m & ~has_goal).sum())
-            m = has_goal
-            choice = g_idx[np.clip(lo + np.floor(pick_u * cnt).astype(np.int64), 0, max(len(g_idx) - 1, 0))] \
-                if len(g_idx) else np.zeros(K, dtype=np.int64)
-            go = pts[np.where(m, choice, K)]  # [K, 3]; rows with m False are ignored below
-            idx = np.flatnonzero(m)
-            if idx.size == 0:
+            survivors = self._round(K, rng, rej)
+            if survivors is None:
                 continue
-            # geodesic >= euclidean: pairs already too far apart in a straight line skip the planner
-            euc = np.linalg.norm(go - st, axis=-1)
-            far = m & (euc > s.max_geodesic)
-            rej["too_long"] += int(far.sum())
-            m &= ~far
-            idx = np.flatnonzero(m)
-            geo = np.full(K, np.inf)
-            if idx.size:
-                geo[idx] = torch.as_tensor(
-                    self.navmesh.geodesic_distance(st[idx], go[idx])).double().cpu().numpy()
-            fin = np.isfinite(geo)
-            rej["unreachable"] += int((m & ~fin).sum())
-            m &= fin
-            short = m & (geo < s.min_geodesic)
-            rej["too_short"] += int(short.sum())
-            m &= ~short
-            long_ = m & (geo > s.max_geodesic)
-            rej["too_long"] += int(long_.sum())
-            m &= ~long_
-            ratio = geo / np.maximum(euc, 1e-6)
-            straight = m & (ratio < s.min_ratio) & (keep_u >= s.straight_keep_prob)
-            rej["too_straight"] += int(straight.sum())
-            m &= ~straight
-            radius = s.goal_radius_for(np.where(np.isfinite(geo), geo, 0.0))
-            reach = m & (euc <= radius)
-            rej["goal_in_reach"] += int(reach.sum())
-            m &= ~reach
-            cand = np.flatnonzero(m)
-            if cand.size == 0:
-                continue
+            st, go, isl_s, euc, geo, radius, cand = survivors
             # minimum separation: against everything accepted so far (vectorised), then greedily
             # inside this round's survivors (few), in draw order so the result is deterministic.
             st_nav, go_nav = self._to_nav(st[cand]), self._to_nav(go[cand])

@@ -1,6 +1,6 @@
 """LPIPS (Zhang et al. 2018, 'alex' variant) in plain torch, from locally provided weights.
 
-The framework never downloads weights (DESIGN.md: no network at run time), so LPIPS is computed
+The framework never downloads weights (ARCHITECTURE.md: no network at run time), so LPIPS is computed
 only when the user points at two local files:
 - `backbone_path`: a torchvision AlexNet state dict (`alexnet-owt-7be5be79.pth`; keys
   `features.{0,3,6,8,10}.{weight,bias}`; any `classifier.*` keys are ignored);

@@ -12,8 +12,6 @@ layout `render()` returns.
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 
@@ -110,7 +108,3 @@ def psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = N
     """
     m = mse(pred, target, mask)
     return 10.0 * torch.log10(torch.as_tensor(data_range ** 2, dtype=m.dtype) / m)
-
-
-def psnr_from_mse(m: float, data_range: float = 1.0) -> float:
-    return math.inf if m <= 0 else 10.0 * math.log10(data_range ** 2 / m)

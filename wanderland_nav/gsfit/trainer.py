@@ -93,28 +93,6 @@ class FitConfig:
     densify: DensifySettings = field(default_factory=DensifySettings)
 
 
-def fit_config_from_dict(d: dict) -> FitConfig:
-    """Plain nested dict (e.g. a resolved Hydra node) -> FitConfig; unknown keys are errors."""
-    sub = {"init": InitSettings, "lr": LearningRates, "loss": LossWeights, "densify": DensifySettings}
-    known = set(FitConfig.__dataclass_fields__)
-    unknown = set(d) - known
-    if unknown:
-        raise ValueError(f"fit config: unknown key(s) {sorted(unknown)}; known: {sorted(known)}")
-    kw = {}
-    for k, v in d.items():
-        if k in sub:
-            fields_ = set(sub[k].__dataclass_fields__)
-            bad = set(v or {}) - fields_
-            if bad:
-                raise ValueError(f"fit.{k}: unknown key(s) {sorted(bad)}; known: {sorted(fields_)}")
-            kw[k] = sub[k](**(v or {}))
-        elif k == "background":
-            kw[k] = tuple(float(x) for x in v)
-        else:
-            kw[k] = v
-    return FitConfig(**kw)
-
-
 def _default_render():
     from wanderland_nav.render import render
 

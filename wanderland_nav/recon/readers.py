@@ -27,7 +27,7 @@ import torch
 from wanderland_nav.geometry import quat_to_rotmat
 from wanderland_nav.recon.poses import PoseSet, ReconInputError, from_cam_from_world
 from wanderland_nav.scene import colmap as C
-from wanderland_nav.scene.model import SceneFormatError
+from wanderland_nav.scene.types import SceneFormatError
 from wanderland_nav.scene.transforms import _norm_name, read_transforms_json
 
 _SCENE_MARKERS = ("sparse", "raw_pcd.ply", "scene.ply", "lidar", "scene_meta.json")

@@ -75,16 +75,3 @@ class ConsoleCSVLogger:
     def close(self) -> None:
         self.flush()
 
-
-def make_logger(kind: str, out_dir: str | Path | None, **kwargs) -> Logger:
-    """`"console"` (console + CSV) or `"rerun"` (provided by `wanderland_nav.viz`)."""
-    if kind in ("console", "csv"):
-        return ConsoleCSVLogger(out_dir, **kwargs)
-    if kind == "rerun":
-        try:
-            from wanderland_nav.viz import RerunLogger  # the viz package owns rerun
-        except ImportError as e:
-            raise ImportError("logger=rerun needs wanderland_nav.viz.RerunLogger, which is not available: "
-                              f"{e}") from e
-        return RerunLogger(out_dir, **kwargs)
-    raise ValueError(f"unknown logger {kind!r}; expected 'console' or 'rerun'")

@@ -10,9 +10,9 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "Scene": "wanderland_nav.scene.model",
-    "Camera": "wanderland_nav.scene.model",
-    "SceneFormatError": "wanderland_nav.scene.model",
+    "Scene": "wanderland_nav.scene.types",
+    "Camera": "wanderland_nav.scene.types",
+    "SceneFormatError": "wanderland_nav.scene.types",
     "load_scene": "wanderland_nav.scene.loader",
     "make_demo_scene": "wanderland_nav.scene.demo",
     "extract_collision_mesh": "wanderland_nav.scene.collision",

@@ -24,7 +24,7 @@ import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
 from wanderland_nav.scene import colmap as C
-from wanderland_nav.scene.model import Camera, Scene, SceneFormatError
+from wanderland_nav.scene.types import Camera, Scene, SceneFormatError
 from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_ply_points, read_points_any
 from wanderland_nav.scene.transforms import (TransformsJson, _norm_name, read_scene_meta,
                                              read_transforms_json)
@@ -35,6 +35,16 @@ DEFAULT_UP = {"v1": "-y", "v2": "+z"}
 _MASK_EXTS = (".png", ".jpg", ".jpeg", ".bmp", ".npy")
 _DEPTH_EXTS = (".npy", ".png", ".exr", ".tif", ".tiff", ".pfm")
 _QUAT_NORM_TOL = 1e-2
+
+
+#: files whose presence marks a folder as a scene folder (any one of them); extend here for new layouts
+SCENE_MARKERS = ("scene_meta.json", "navmesh.npz", "sparse", "transforms.json", "raw_pcd.ply", "3dgs.ply")
+
+
+def is_scene_folder(path) -> bool:
+    """Whether `path` is a scene folder (the one test every entry point uses, via `compose`)."""
+    p = Path(path)
+    return p.is_dir() and any((p / m).exists() for m in SCENE_MARKERS)
 
 
 def load_scene(path, up_axis: str | None = None) -> Scene:

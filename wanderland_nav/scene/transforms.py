@@ -7,7 +7,7 @@ poses are camera-to-world with **OpenGL** camera axes (x right, y up, z back) in
 nerfstudio may have re-oriented (`applied_transform`). We convert to OpenCV axes and undo
 `applied_transform` so the poses land in the COLMAP/scene frame.
 
-`scene_meta.json` (CONTRACTS.md) carries the up axis, the indoor/outdoor tag and nav-frame
+`scene_meta.json` (ARCHITECTURE.md) carries the up axis, the indoor/outdoor tag and nav-frame
 indoor polygons; every field is validated with an error that names the file and the field.
 """
 
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
-from wanderland_nav.scene.model import SceneFormatError
+from wanderland_nav.scene.types import SceneFormatError
 
 # OpenGL camera axes -> OpenCV camera axes (flip y and z), applied on the right of world_from_cam.
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])

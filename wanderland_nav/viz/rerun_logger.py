@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from wanderland_nav.rollouts import Rollout, rollout_from_tensordict
+from wanderland_nav.envs.recording import rollout_from_tensordict
+from wanderland_nav.rollouts import Rollout
 from wanderland_nav.viz.blueprint import default_blueprint
 from wanderland_nav.viz.rerun_rollout import log_rollout
 
@@ -33,13 +34,13 @@ class RerunLogger:
         phase has its own tag (logged); PPO hands over every collected batch as `train` (every n-th logged).
     max_agents: agents of a rollout to show (their frames dominate the recording's size).
     spawn: also stream to a viewer (spawned if none is running; ignored when none can be started).
-    scene: with the first rollout that names its scene (`Rollout.meta.scene_root`), log the scene
-        (point subsample, collision mesh, navmesh, camera frustums) once, as context for the rollouts.
+    scene: the loaded `Scene` (from the caller), logged once with the first scene-frame rollout (point
+        subsample, collision mesh, navmesh, camera frustums) as context; None: rollouts only.
     """
 
     def __init__(self, out_dir: str | Path | None, *, rollout_every: int = 5, max_agents: int = 2,
                  spawn: bool = False, application_id: str = "wanderland_nav", recording_id: str | None = None,
-                 file_name: str = "rerun.rrd", scene: bool = True):
+                 file_name: str = "rerun.rrd", scene=None):
         self.path = Path(out_dir) / file_name if out_dir is not None else None
         rid = recording_id or (Path(out_dir).resolve().name if out_dir is not None else "run")
         self.rec = rr.RecordingStream(application_id, recording_id=rid)
@@ -54,7 +55,7 @@ class RerunLogger:
                 print(f"RerunLogger: could not spawn a viewer ({e}); writing {self.path}")
         self.rollout_every, self.max_agents = int(rollout_every), int(max_agents)
         self._rollout_calls: dict[str, int] = {}
-        self._scene_pending = bool(scene)
+        self._scene = scene  # a loaded Scene from the caller (never read from disk here), or None
         self._meta = None  # the last Rollout's meta (frames, camera), reused for TensorDict rollouts
         self.rollouts_logged = 0
 
@@ -90,13 +91,11 @@ class RerunLogger:
         else:
             self._meta = rollout.meta
         in_scene = self._meta is not None  # poses can be placed in the scene frame
-        if in_scene and self._scene_pending and rollout.meta.scene_root and Path(rollout.meta.scene_root).is_dir():
-            self._scene_pending = False
-            from wanderland_nav.scene import load_scene
+        if in_scene and self._scene is not None:
             from wanderland_nav.viz.rerun_scene import log_scene
 
-            log_scene(self.rec, load_scene(rollout.meta.scene_root), max_points=20_000, max_cameras=16,
-                      camera_images=False)
+            log_scene(self.rec, self._scene, max_points=20_000, max_cameras=16, camera_images=False)
+            self._scene = None  # once
         agents = list(range(min(self.max_agents, rollout.num_agents)))
         safe_tag = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in str(tag))
         prefix = f"world/rollouts/{safe_tag}" if in_scene else f"rollouts/{safe_tag}/nav"  # nav frame: own space

@@ -76,12 +76,6 @@ class Layout:
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
-    @property
-    def face_areas(self) -> np.ndarray:
-        v = self.vertices[self.faces]
-        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-
-
 def indoor_polygon() -> list[list[float]]:
     """Lobby interior (inside the outer walls), nav-frame xy, counter-clockwise."""
     x0, x1, y0, y1 = BUILDING
@@ -274,17 +268,17 @@ def _car(b: _Builder, x0, x1, yc, z):
             b.trimesh_(c, M["rubber"])
 
 
-def build_layout(seed: int = 0) -> Layout:
-    """The demo block for `seed` (structure fixed; seed jitters details only)."""
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 7301]))
-    b = _Builder()
+TREE_X = (-19.0, -6.0, 8.0, 21.0)  # street trees along the sidewalk (pits in the paving)
+
+
+def _ground_levels(b: "_Builder") -> None:
+    """Street, kerb, sidewalk, the courtyard level, the plaza, its stairs and ramp."""
     lx0, lx1 = X_LONG
     # ---- street, kerb, sidewalk
     b.rect(lx0, lx1, STREET_Y[0], STREET_Y[1], STREET_Z, M["asphalt"])
     b.vquad_y(CURB_Y[0], lx0, lx1, STREET_Z, SIDEWALK_Z, M["granite"], -1)
     b.rect(lx0, lx1, CURB_Y[0], CURB_Y[1], SIDEWALK_Z, M["granite"])
-    tree_x = [-19.0, -6.0, 8.0, 21.0]
-    pits = [(x - 0.7, x + 0.7, -10.7 - 0.7, -10.7 + 0.7) for x in tree_x]
+    pits = [(x - 0.7, x + 0.7, -10.7 - 0.7, -10.7 + 0.7) for x in TREE_X]
     for r in rect_minus((lx0, lx1, SIDEWALK_Y[0], SIDEWALK_Y[1]), pits):
         b.rect(*r, SIDEWALK_Z, M["paving"])
     # ---- lower level north of the sidewalk (courtyard, strips around the building)
@@ -299,7 +293,6 @@ def build_layout(seed: int = 0) -> Layout:
     b.rect(bx0, bx1, by0, by1, SIDEWALK_Z, M["lobby_floor"])
     # ---- plaza: top (stone with a lawn), retaining faces
     lawn = (-28.5, -17.0, 15.0, 19.0)
-    planters_plaza = [(-20.0, 6.0), (-4.0, 6.0), (0.0, 16.0)]
     for r in rect_minus(PLAZA, [lawn]):
         b.rect(*r, PLAZA_Z, M["plaza_stone"])
     b.rect(*lawn, PLAZA_Z, M["grass"])
@@ -321,6 +314,11 @@ def build_layout(seed: int = 0) -> Layout:
            [0, -(PLAZA_Z - SIDEWALK_Z), ry1 - ry0], M["concrete"])
     for xs, sgn in ((rx0, -1), (rx1, +1)):
         b.poly([[xs, ry0, SIDEWALK_Z], [xs, ry1, SIDEWALK_Z], [xs, ry1, PLAZA_Z]], [sgn, 0, 0], M["concrete"])
+
+
+def _building(b: "_Builder") -> None:
+    """The lobby: exterior walls with doorways, partition, pillars, desk, ceiling, upper block."""
+    bx0, bx1, by0, by1 = BUILDING
     # ---- building: exterior walls with doorways, partition, pillars, desk, ceiling, upper block
     z0, zt = SIDEWALK_Z, LOBBY_TOP
     _wall_x(b, bx0, bx1, by0, by0 + WALL_T, z0, zt, SOUTH_DOORS, M["brick"], M["plaster"], "+y")
@@ -333,6 +331,12 @@ def build_layout(seed: int = 0) -> Layout:
         b.box((x - PILLAR_HALF, y - PILLAR_HALF, z0), (x + PILLAR_HALF, y + PILLAR_HALF, zt), M["concrete"], skip=("-z", "+z"))
     b.box((22.0, 9.8, z0), (26.0, 10.6, z0 + 1.05), M["wood"])  # reception desk
     b.box((bx0, by0, zt), (bx1, by1, BUILDING_TOP), M["facade"], mats={"-z": M["ceiling"], "+z": M["concrete"]}, skip=())
+
+
+def _backdrop(b: "_Builder") -> None:
+    """Facade across the street, garden wall, neighbouring blocks closing the courtyard level."""
+    lx0, lx1 = X_LONG
+    px0, px1 = PLAZA[0], PLAZA[1]
     # ---- backdrop: facade across the street, garden wall behind the plaza and the building
     b.vquad_y(STREET_Y[0], lx0, lx1, STREET_Z, 14.0, M["facade"], +1)
     b.box((px0, 20.0, PLAZA_Z), (px1, 20.4, PLAZA_Z + 2.4), M["brick"], skip=("-z", "+y"))
@@ -340,9 +344,12 @@ def build_layout(seed: int = 0) -> Layout:
     # neighbouring blocks closing the courtyard level at x = +-30 (their outer faces are never seen)
     b.box((BLOCK_X[1], SIDEWALK_Y[1], SIDEWALK_Z), (X_LONG[1], 20.4, 10.0), M["facade"], skip=("-z", "+x", "+y"))
     b.box((X_LONG[0], SIDEWALK_Y[1], SIDEWALK_Z), (BLOCK_X[0], 20.4, 10.0), M["facade"], skip=("-z", "-x", "+y"))
-    # ---- furniture (seed jitters positions by a few cm to dm)
+
+
+def _furniture(b: "_Builder", rng: np.random.Generator) -> None:
+    """Trees, poles, benches, planters, bollards and the car (the seed jitters positions)."""
     j = lambda s=0.25: float(rng.uniform(-s, s))  # noqa: E731
-    for x in tree_x:
+    for x in TREE_X:
         _tree(b, rng, x + 0.0, -10.7, SIDEWALK_Z)
     for x, y in ((-24.0, 11.0), (-2.0, 11.5)):
         _tree(b, rng, x + j(0.3), y + j(0.3), PLAZA_Z)
@@ -351,7 +358,7 @@ def build_layout(seed: int = 0) -> Layout:
     for x, y, along in ((-16.0 + j(), -6.9, True), (-1.0 + j(), -6.9, True), (-18.0 + j(), 9.0, True),
                         (-7.0 + j(), 14.5, True), (2.6, 6.0 + j(), False)):
         _bench(b, x, y, walk_height(np.array([x, y])).item(), along)
-    for x, y in planters_plaza:
+    for x, y in ((-20.0, 6.0), (-4.0, 6.0), (0.0, 16.0)):  # on the plaza
         _planter(b, x + j(0.2), y + j(0.2), PLAZA_Z, rng)
     for x, y in ((-3.0, -3.5), (3.0, -1.0), (29.0, 0.0)):
         _planter(b, x + j(0.2), y + j(0.2), SIDEWALK_Z, rng)
@@ -361,6 +368,16 @@ def build_layout(seed: int = 0) -> Layout:
         b.trimesh_(c, M["metal"])
     car_x0 = -10.0 + j(0.5)
     _car(b, car_x0, car_x0 + 4.4, -13.3, STREET_Z)
+
+
+def build_layout(seed: int = 0) -> Layout:
+    """The demo block for `seed` (structure fixed; seed jitters details only)."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 7301]))
+    b = _Builder()
+    _ground_levels(b)
+    _building(b)
+    _backdrop(b)
+    _furniture(b, rng)
     V, F, Mt = b.build()
     palette = np.array([[0.62, 0.08, 0.07], [0.08, 0.22, 0.55], [0.85, 0.85, 0.82], [0.15, 0.35, 0.2]])
     car_color = palette[int(rng.integers(len(palette)))]

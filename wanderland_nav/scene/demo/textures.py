@@ -111,89 +111,101 @@ def albedo(material: np.ndarray, p: np.ndarray, n: np.ndarray, fw: np.ndarray, s
     with outward normals `n [N, 3]` and sample footprints `fw [N]` (metres)."""
     N = material.shape[0]
     out = np.zeros((N, 3))
-    u_all, v_all, _vert = _coords(p, n)
+    u_all, v_all, vert_all = _coords(p, n)
     for mid in np.unique(material):
         sel = np.flatnonzero(material == mid)
         name = MATERIALS[int(mid)]
-        u, v, f, q = u_all[sel], v_all[sel], fw[sel], p[sel]
-        s = seed * 1000 + int(mid) * 17
-        if name == "asphalt":
-            c = 0.25 + 0.5 * fbm(u, v, 0.8, 7, s, f) * 0.35 + 0.08 * fbm(u, v, 24.0, 2, s + 5, f)
-            col = np.stack([c, c, c * 1.04], -1)
-            # markings: dashed centre line, solid edge lines, a zebra crossing
-            dash = box_mask(np.mod(u, 6.0), v, 0.0, 3.0, -16.08, -15.92, f)
-            edge = np.maximum(box_mask(u, v, -1e9, 1e9, -19.7, -19.58, f), box_mask(u, v, -1e9, 1e9, -12.42, -12.3, f))
-            zebra = lines(u, 1.0, 0.5, f, offset=0.25) * box_mask(u, v, -3.0, 0.5, -19.3, -12.7, f)
-            m = np.clip(dash + edge + zebra, 0, 1) * (1.0 - _vert[sel])
-            col = _mix(col, [0.88, 0.87, 0.8], 0.9 * m)
-        elif name == "granite":
-            c = 0.56 + 0.3 * fbm(u, v, 20.0, 3, s, f)
-            col = np.stack([c, c, c * 1.03], -1)
-        elif name == "paving":
-            rnd, j = _tiles(u, v, 0.4, 0.4, 0.015, f, s, bond=False)
-            base = np.array([0.63, 0.6, 0.55]) * (0.88 + 0.24 * rnd)[:, None]
-            col = _mix(base, [0.36, 0.35, 0.33], j) + 0.06 * fbm(u, v, 3.0, 4, s, f)[:, None]
-        elif name == "plaza_stone":
-            rnd, j = _tiles(u, v, 1.0, 0.5, 0.02, f, s, bond=True)
-            base = _mix([0.76, 0.68, 0.55], [0.6, 0.55, 0.5], rnd)
-            col = _mix(base, [0.4, 0.37, 0.33], j) + 0.05 * fbm(u, v, 5.0, 4, s, f)[:, None]
-        elif name == "concrete":
-            c = 0.6 + 0.25 * fbm(u, v, 1.5, 6, s, f) - 0.12 * lines(u, 1.2, 0.012, f) - 0.1 * lines(v, 0.6, 0.01, f)
-            col = np.stack([c, c * 0.99, c * 0.96], -1)
-        elif name in ("brick", "facade"):
-            rnd, j = _tiles(u, v, 0.225, 0.075, 0.011, f, s, bond=True)
-            base = _mix([0.58, 0.26, 0.17], [0.42, 0.2, 0.14], rnd)
-            col = _mix(base, [0.74, 0.71, 0.66], j)
-            if name == "facade":  # window grid above the ground floor
-                wm = box_mask(np.mod(u, 3.0), np.mod(v - 0.15, 3.2), 0.8, 2.2, 0.9, 2.6, f) * (q[:, 2] > 3.0)
-                frame = box_mask(np.mod(u, 3.0), np.mod(v - 0.15, 3.2), 0.7, 2.3, 0.8, 2.7, f) * (q[:, 2] > 3.0)
-                wc = _mix([0.12, 0.16, 0.22], [0.35, 0.45, 0.55], hash01(np.floor(u / 3.0).astype(np.int64),
-                                                                           np.floor(v / 3.2).astype(np.int64), s))
-                col = _mix(_mix(col, [0.85, 0.85, 0.82], frame), wc, wm)
-        elif name == "lobby_floor":
-            cu, cv = np.floor(u / 0.6), np.floor(v / 0.6)
-            chk = np.mod(cu + cv, 2)
-            a = np.clip((f - 0.15) / 0.3, 0, 1)  # checker averages out beyond ~0.3 m footprints
-            t = (1 - a) * chk + a * 0.5
-            col = _mix([0.86, 0.84, 0.8], [0.3, 0.28, 0.27], t) + 0.08 * fbm(u, v, 4.0, 5, s, f)[:, None]
-        elif name == "plaster":
-            c = 0.86 + 0.08 * fbm(u, v, 2.0, 5, s, f)
-            col = np.stack([c, c * 0.97, c * 0.9], -1)
-            h = q[:, 2] - 0.15
-            col = _mix(col, [0.45, 0.36, 0.3], box_mask(h, h, -1e9, 1.0, -1e9, 1e9, f) * _vert[sel])
-        elif name == "ceiling":
-            g = np.maximum(lines(u, 0.6, 0.02, f), lines(v, 0.6, 0.02, f))
-            lamp = box_mask(np.mod(u, 3.0), np.mod(v, 3.0), 1.2, 1.8, 1.2, 1.8, f)
-            col = _mix(_mix(np.full((len(sel), 3), 0.9), [0.62, 0.62, 0.6], g), [1.0, 0.98, 0.9], lamp)
-        elif name == "wood":
-            w = 0.5 + 0.5 * np.sin(2 * np.pi * (v * 30.0 + 2.0 * fbm(u, v, 4.0, 3, s, f)))
-            a = np.clip((f - 0.01) / 0.03, 0, 1)
-            col = _mix([0.55, 0.36, 0.2], [0.4, 0.25, 0.13], (1 - a) * w + a * 0.5)
-        elif name == "metal":
-            c = 0.27 + 0.1 * fbm(u, v, 8.0, 3, s, f)
-            col = np.stack([c, c * 1.02, c * 1.06], -1)
-        elif name == "bark":
-            c = 0.5 + 0.6 * fbm(u * 4.0, v, 3.0, 4, s, f)
-            col = np.array([0.36, 0.24, 0.15]) * c[:, None]
-        elif name == "foliage":
-            c = 0.65 + 1.3 * fbm(q[:, 0] + q[:, 2], q[:, 1] - q[:, 2], 2.5, 5, s, f)
-            col = np.array([0.2, 0.42, 0.13]) * c[:, None] + np.array([0.05, 0.02, 0.0]) * (c[:, None] > 0.9)
-        elif name == "terracotta":
-            col = np.array([0.68, 0.37, 0.24]) * (0.9 + 0.4 * fbm(u, v, 6.0, 3, s, f))[:, None]
-        elif name == "soil":
-            col = np.array([0.32, 0.23, 0.15]) * (0.85 + 0.6 * fbm(u, v, 10.0, 4, s, f))[:, None]
-        elif name == "car_paint":
-            col = np.asarray(car_color) * (0.95 + 0.1 * fbm(u, v, 2.0, 2, s, f))[:, None]
-        elif name == "glass":
-            col = _mix([0.1, 0.13, 0.17], [0.3, 0.36, 0.42], np.clip(0.5 + fbm(u, v, 0.7, 2, s, f), 0, 1))
-        elif name == "rubber":
-            col = np.full((len(sel), 3), 0.07)
-        elif name == "grass":
-            col = np.array([0.3, 0.5, 0.17]) * (0.8 + 0.9 * fbm(u, v, 3.0, 6, s, f))[:, None]
-        else:  # pragma: no cover - MATERIALS and this table are edited together
-            raise KeyError(f"textures.albedo: no texture for material {name!r}")
-        out[sel] = col
+        at = (u_all[sel], v_all[sel], fw[sel], p[sel], vert_all[sel], seed * 1000 + int(mid) * 17)
+        col = _ground_and_wall_albedo(name, *at)
+        out[sel] = col if col is not None else _object_albedo(name, *at, car_color)
     return np.clip(out, 0.0, 1.0)
+
+
+def _ground_and_wall_albedo(name: str, u, v, f, q, vert, s):
+    """Pavements, stone, concrete, brick, facades and floors (None: not one of those materials)."""
+    if name == "asphalt":
+        c = 0.25 + 0.5 * fbm(u, v, 0.8, 7, s, f) * 0.35 + 0.08 * fbm(u, v, 24.0, 2, s + 5, f)
+        col = np.stack([c, c, c * 1.04], -1)
+        # markings: dashed centre line, solid edge lines, a zebra crossing
+        dash = box_mask(np.mod(u, 6.0), v, 0.0, 3.0, -16.08, -15.92, f)
+        edge = np.maximum(box_mask(u, v, -1e9, 1e9, -19.7, -19.58, f), box_mask(u, v, -1e9, 1e9, -12.42, -12.3, f))
+        zebra = lines(u, 1.0, 0.5, f, offset=0.25) * box_mask(u, v, -3.0, 0.5, -19.3, -12.7, f)
+        m = np.clip(dash + edge + zebra, 0, 1) * (1.0 - vert)
+        col = _mix(col, [0.88, 0.87, 0.8], 0.9 * m)
+    elif name == "granite":
+        c = 0.56 + 0.3 * fbm(u, v, 20.0, 3, s, f)
+        col = np.stack([c, c, c * 1.03], -1)
+    elif name == "paving":
+        rnd, j = _tiles(u, v, 0.4, 0.4, 0.015, f, s, bond=False)
+        base = np.array([0.63, 0.6, 0.55]) * (0.88 + 0.24 * rnd)[:, None]
+        col = _mix(base, [0.36, 0.35, 0.33], j) + 0.06 * fbm(u, v, 3.0, 4, s, f)[:, None]
+    elif name == "plaza_stone":
+        rnd, j = _tiles(u, v, 1.0, 0.5, 0.02, f, s, bond=True)
+        base = _mix([0.76, 0.68, 0.55], [0.6, 0.55, 0.5], rnd)
+        col = _mix(base, [0.4, 0.37, 0.33], j) + 0.05 * fbm(u, v, 5.0, 4, s, f)[:, None]
+    elif name == "concrete":
+        c = 0.6 + 0.25 * fbm(u, v, 1.5, 6, s, f) - 0.12 * lines(u, 1.2, 0.012, f) - 0.1 * lines(v, 0.6, 0.01, f)
+        col = np.stack([c, c * 0.99, c * 0.96], -1)
+    elif name in ("brick", "facade"):
+        rnd, j = _tiles(u, v, 0.225, 0.075, 0.011, f, s, bond=True)
+        base = _mix([0.58, 0.26, 0.17], [0.42, 0.2, 0.14], rnd)
+        col = _mix(base, [0.74, 0.71, 0.66], j)
+        if name == "facade":  # window grid above the ground floor
+            wm = box_mask(np.mod(u, 3.0), np.mod(v - 0.15, 3.2), 0.8, 2.2, 0.9, 2.6, f) * (q[:, 2] > 3.0)
+            frame = box_mask(np.mod(u, 3.0), np.mod(v - 0.15, 3.2), 0.7, 2.3, 0.8, 2.7, f) * (q[:, 2] > 3.0)
+            wc = _mix([0.12, 0.16, 0.22], [0.35, 0.45, 0.55], hash01(np.floor(u / 3.0).astype(np.int64),
+                                                                       np.floor(v / 3.2).astype(np.int64), s))
+            col = _mix(_mix(col, [0.85, 0.85, 0.82], frame), wc, wm)
+    elif name == "lobby_floor":
+        cu, cv = np.floor(u / 0.6), np.floor(v / 0.6)
+        chk = np.mod(cu + cv, 2)
+        a = np.clip((f - 0.15) / 0.3, 0, 1)  # checker averages out beyond ~0.3 m footprints
+        t = (1 - a) * chk + a * 0.5
+        col = _mix([0.86, 0.84, 0.8], [0.3, 0.28, 0.27], t) + 0.08 * fbm(u, v, 4.0, 5, s, f)[:, None]
+    else:
+        return None
+    return col
+
+
+def _object_albedo(name: str, u, v, f, q, vert, s, car_color):
+    """Interior finishes, wood, metal, plants, soil, the car, glass and rubber."""
+    if name == "plaster":
+        c = 0.86 + 0.08 * fbm(u, v, 2.0, 5, s, f)
+        col = np.stack([c, c * 0.97, c * 0.9], -1)
+        h = q[:, 2] - 0.15
+        col = _mix(col, [0.45, 0.36, 0.3], box_mask(h, h, -1e9, 1.0, -1e9, 1e9, f) * vert)
+    elif name == "ceiling":
+        g = np.maximum(lines(u, 0.6, 0.02, f), lines(v, 0.6, 0.02, f))
+        lamp = box_mask(np.mod(u, 3.0), np.mod(v, 3.0), 1.2, 1.8, 1.2, 1.8, f)
+        col = _mix(_mix(np.full((len(u), 3), 0.9), [0.62, 0.62, 0.6], g), [1.0, 0.98, 0.9], lamp)
+    elif name == "wood":
+        w = 0.5 + 0.5 * np.sin(2 * np.pi * (v * 30.0 + 2.0 * fbm(u, v, 4.0, 3, s, f)))
+        a = np.clip((f - 0.01) / 0.03, 0, 1)
+        col = _mix([0.55, 0.36, 0.2], [0.4, 0.25, 0.13], (1 - a) * w + a * 0.5)
+    elif name == "metal":
+        c = 0.27 + 0.1 * fbm(u, v, 8.0, 3, s, f)
+        col = np.stack([c, c * 1.02, c * 1.06], -1)
+    elif name == "bark":
+        c = 0.5 + 0.6 * fbm(u * 4.0, v, 3.0, 4, s, f)
+        col = np.array([0.36, 0.24, 0.15]) * c[:, None]
+    elif name == "foliage":
+        c = 0.65 + 1.3 * fbm(q[:, 0] + q[:, 2], q[:, 1] - q[:, 2], 2.5, 5, s, f)
+        col = np.array([0.2, 0.42, 0.13]) * c[:, None] + np.array([0.05, 0.02, 0.0]) * (c[:, None] > 0.9)
+    elif name == "terracotta":
+        col = np.array([0.68, 0.37, 0.24]) * (0.9 + 0.4 * fbm(u, v, 6.0, 3, s, f))[:, None]
+    elif name == "soil":
+        col = np.array([0.32, 0.23, 0.15]) * (0.85 + 0.6 * fbm(u, v, 10.0, 4, s, f))[:, None]
+    elif name == "car_paint":
+        col = np.asarray(car_color) * (0.95 + 0.1 * fbm(u, v, 2.0, 2, s, f))[:, None]
+    elif name == "glass":
+        col = _mix([0.1, 0.13, 0.17], [0.3, 0.36, 0.42], np.clip(0.5 + fbm(u, v, 0.7, 2, s, f), 0, 1))
+    elif name == "rubber":
+        col = np.full((len(u), 3), 0.07)
+    elif name == "grass":
+        col = np.array([0.3, 0.5, 0.17]) * (0.8 + 0.9 * fbm(u, v, 3.0, 6, s, f))[:, None]
+    else:  # pragma: no cover - MATERIALS and this table are edited together
+        raise KeyError(f"textures.albedo: no texture for material {name!r}")
+    return col
 
 
 def lighting(n: np.ndarray, indoor: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from wanderland_nav.cache import json_digest, read_record
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh, load_collision_mesh
 from wanderland_nav.scene.loader import load_scene
-from wanderland_nav.scene.model import Scene
+from wanderland_nav.scene.types import Scene
 
 log = logging.getLogger(__name__)
 

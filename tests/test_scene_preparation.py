@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from wanderland_nav import pipeline
-from wanderland_nav.pipeline import prepare_scene
+from wanderland_nav import scene_preparation
+from wanderland_nav.scene_preparation import prepare_scene
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.collision import CollisionSettings
 
@@ -126,15 +126,13 @@ def test_navmesh_rebakes_only_when_needed(demo_copy, monkeypatch):
 
 
 def test_prepare_entry_point(demo_copy, monkeypatch, capsys):
-    from hydra import compose, initialize_config_dir
+    from wanderland_nav.compose import compose_config, scene_overrides
+    from wanderland_nav.prepare import run
 
-    from wanderland_nav.prepare import CONF_DIR, rewrite_scene_override, run
-
-    assert rewrite_scene_override(["scene=demo", "scene=/x/y", "force=true"]) == \
-        ["scene=demo", "scene_path=/x/y", "force=true"]
-    with initialize_config_dir(version_base="1.3", config_dir=str(CONF_DIR)):
-        cfg = compose("prepare", overrides=[f"scene_path={demo_copy}", "navmesh_enabled=false",
-                                            "collision.voxel_size=0.3"])
+    assert scene_overrides(["scene=demo", "scene=/x/y", "force=true"]) == \
+        ["scene=demo", "scene=folder", "scene.path=/x/y", "force=true"]
+    cfg = compose_config("prepare", [f"scene={demo_copy}", "navmesh_enabled=false",
+                                     "navigation.collision.voxel_size=0.3"])
     rep = run(cfg)
     out = capsys.readouterr().out
     assert "collision mesh:" in out and "points" in out and "up axis -y" in out
@@ -150,6 +148,6 @@ def test_capture_positions_v2_lidar_poses(tmp_path, shared_data):
     poses = np.loadtxt(shared_data / "lidar/kitti/gicp_poses_kitti_format.txt")[:2]
     np.savetxt(root / "lidar/poses.txt", poses)
     s = prepare_scene(root, collision=CollisionSettings(voxel_size=0.3, crop_radius=10.0), bake_navmesh=False)
-    np.testing.assert_allclose(pipeline.capture_positions(s), poses.reshape(2, 3, 4)[:, :, 3])
+    np.testing.assert_allclose(scene_preparation.capture_positions(s), poses.reshape(2, 3, 4)[:, :, 3])
     mesh = trimesh.load(s.collision_mesh_path, process=False)
     assert np.linalg.norm(mesh.vertices[:, :2], axis=1).max() < 10.0 + np.abs(poses[:, [3, 7]]).max() + 0.5

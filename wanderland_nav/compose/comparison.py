@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wanderland_nav.rl.policy_env import PolicyActor, lod_gaussians, policy_from_checkpoint, shaped_env_config
+from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
+from wanderland_nav.envs.config import NavEnvConfig
+from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
 from wanderland_nav.rl.report import comparison_table
 
 
@@ -22,12 +24,19 @@ def checkpoint_label(path: Path) -> str:
     return "/".join(parts[-2:]) if parts else p.stem
 
 
-def compare_checkpoints(paths, scene, episodes_path, *, split: str | None, num_episodes: int | None,
+def stored_env_config(conf: dict, path) -> NavEnvConfig:
+    """The env config a checkpoint was trained with, through the same schema as `train` (strict)."""
+    from wanderland_nav.compose.schema import typed_config
+
+    try:
+        return typed_config(conf.get("env") or {}, NavEnvConfig)
+    except Exception as e:  # an older checkpoint with keys this version no longer has
+        raise ValueError(f"{path}: stored env config does not fit this version: {e}") from e
+
+
+def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
                         batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table)."""
-    from wanderland_nav.envs.evaluation import run_evaluation
-    from wanderland_nav.envs.factory import make_nav_env
-
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")
     rows, results = {}, {}
@@ -35,11 +44,10 @@ def compare_checkpoints(paths, scene, episodes_path, *, split: str | None, num_e
         policy, ckpt = policy_from_checkpoint(path, device)
         conf = ckpt.get("config") or {}
         render = conf.get("render") or {}
-        size = render.get("image_size")
-        env_cfg = shaped_env_config(conf.get("env"), policy, tuple(size) if size else None)
-        g = lod_gaussians(scene.gaussians_path, render.get("max_gaussians"))
-        env = make_nav_env(scene, config=env_cfg, batch_size=batch_size, device=device, episodes_path=episodes_path,
-                           split=split, seed=seed, gaussians=g)
+        env_cfg = shaped_env_config(stored_env_config(conf, path), policy, render.get("image_size"))
+        g = scene_gaussians(scene, render.get("max_gaussians"), needed=env_cfg.camera.enabled)
+        env = env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size, seed=seed, device=device,
+                          navmesh=navmesh, gaussians=g)()
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)

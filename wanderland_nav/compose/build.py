@@ -1,0 +1,108 @@
+"""Config parts -> objects: the env shaped to a policy, level-of-detail Gaussians, env factories,
+loggers and policies rebuilt from checkpoints. Only `compose` and the entry points call these."""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from pathlib import Path
+
+from wanderland_nav.envs.config import NavEnvConfig
+
+
+def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfig:
+    """A copy of `env` shaped to the policy: camera `[H, W]` = `image_size` (default the policy's input
+    size), at least the policy's context of history, its waypoint actions. The policy declares what the
+    camera must deliver in ONE place (`PolicyConfig.env_requirements`); this is where the env hears it."""
+    need = policy.config.env_requirements()
+    h, w = tuple(image_size) if image_size else need.image_size
+    camera = dataclasses.replace(env.camera, height=int(h), width=int(w), history=max(env.camera.history, need.history))
+    kinematics = dataclasses.replace(env.kinematics, num_waypoints=need.num_waypoints, action_mode=need.action_mode)
+    return dataclasses.replace(env, camera=camera, kinematics=kinematics)
+
+
+def blind_env_config(env: NavEnvConfig) -> NavEnvConfig:
+    """Camera off (reference policies never look): no rendering, minimal all-zero frames."""
+    return dataclasses.replace(env, camera=dataclasses.replace(env.camera, enabled=False, width=8, height=8))
+
+
+def scene_gaussians(scene, max_gaussians: int | None, *, needed: bool = True):
+    """The scene's Gaussians at `max_gaussians` level of detail; None when the camera is off.
+    A camera without `3dgs.ply` raises naming the scene and the file."""
+    if not needed:
+        return None
+    path = scene.gaussians_path
+    if path is None or not Path(path).is_file():
+        raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
+                                "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
+                                "turn the camera off (env.camera.enabled=false)")
+    from wanderland_nav.render import Gaussians
+    from wanderland_nav.render.lod import lod_subset
+
+    return lod_subset(Gaussians.load(path), max_gaussians)
+
+
+def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_size: int, seed: int, device: str,
+                navmesh, gaussians):
+    """A picklable `() -> NavEnv` over loaded parts (collector workers call it)."""
+    from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.episodes import load_episodes
+
+    split = split if split is not None else env_cfg.split
+    episodes = load_episodes(episodes_path, split=split)
+    if not episodes:
+        raise ValueError(f"{episodes_path}: no episodes in split {split!r}")
+    goal_images = None
+    if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
+        from wanderland_nav.envs.episode_table import load_goal_images
+
+        goal_images = load_goal_images(episodes, [Path(episodes_path).parent, Path(scene.root)], env_cfg.camera.height,
+                                       env_cfg.camera.width, where=str(episodes_path))
+    return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
+                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)
+
+
+def load_navmesh(scene):
+    from planners import NavMesh
+
+    if scene.navmesh_path is None or not Path(scene.navmesh_path).is_file():
+        raise FileNotFoundError(f"scene {scene.name} ({scene.root}): navmesh.npz missing; prepare the scene first "
+                                f"(python -m wanderland_nav.prepare scene={scene.root})")
+    return NavMesh.load(scene.navmesh_path)
+
+
+def make_logger(logger_cfg, run_dir: Path, scene=None):
+    """`logger.kind`: console (+ metrics.csv) or rerun (`<run_dir>/rerun.rrd`, with the scene as context)."""
+    from wanderland_nav.rl.loggers import ConsoleCSVLogger
+
+    if logger_cfg.kind in ("console", "csv"):
+        return ConsoleCSVLogger(run_dir, print_every=logger_cfg.print_every)
+    if logger_cfg.kind == "rerun":
+        from wanderland_nav.viz import RerunLogger
+
+        return RerunLogger(run_dir, rollout_every=logger_cfg.rollout_every, max_agents=logger_cfg.max_agents,
+                           spawn=logger_cfg.spawn, scene=scene)
+    raise ValueError(f"logger.kind={logger_cfg.kind!r}: expected console or rerun")
+
+
+def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
+    from policies import make_policy
+
+    kw = dict(policy_cfg)
+    if "name" not in kw:
+        raise ValueError("policy: no `name` (conf/policy/<name>.yaml)")
+    return make_policy(kw.pop("name"), **kw).to(device)
+
+
+def policy_from_checkpoint(path, device: str = "cpu"):
+    """Rebuild the policy a training checkpoint was made with (its stored config) and load its weights."""
+    from wanderland_nav.rl.checkpoint import load_checkpoint
+
+    ckpt = load_checkpoint(path)
+    pol = (ckpt.get("config") or {}).get("policy") or {}
+    if "name" not in pol:
+        raise ValueError(f"{path}: checkpoint config has no policy.name; cannot rebuild the policy")
+    policy = make_policy_from_config(pol, device)
+    policy.load_state_dict(ckpt["policy"])
+    policy.pretrained_from = str(path)
+    return policy.eval(), ckpt

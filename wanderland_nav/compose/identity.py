@@ -1,0 +1,87 @@
+"""Run identity: what a result was computed from, so an old result is never shown for a new run.
+
+identity = hash(resolved config minus cosmetic keys) + hash(scene: its path and the hashes of the
+prepared artefacts the run reads). It goes into every checkpoint and result row; the default run
+folder carries its short form (`outputs/<experiment>/<hash>_seed<seed>`), so a sweep over a setting
+gets one folder per value; resuming a folder made by another identity refuses and says what differs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+#: keys that change how a run looks, not what it computes (dotted paths into the resolved config)
+COSMETIC_KEYS = ("progress", "run_dir", "out_dir", "out", "logger", "save_rollouts", "save_frames", "exp_name",
+                 "resume", "rerun", "log_every")
+#: prepared artefacts whose content a run depends on (relative to the scene folder)
+SCENE_ARTEFACTS = ("navmesh.npz", "3dgs.ply", "episodes.json", "collision_mesh.ply")
+
+
+class RunIdentityError(RuntimeError):
+    """A run folder holds the results of another configuration or scene."""
+
+
+def _digest(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def scene_identity(root, episodes_path=None, files: dict | None = None) -> dict:
+    """`{"path", "artefacts": {file: sha256}}` of the scene: its prepared artefacts (default) or `files`
+    (name -> path), plus the episodes file the run uses."""
+    root = Path(root).resolve()
+    files = dict(files) if files is not None else {name: root / name for name in SCENE_ARTEFACTS}
+    if episodes_path is not None:
+        files["episodes.json"] = Path(episodes_path).resolve()
+    return {"path": str(root), "artefacts": {n: file_sha256(Path(p)) for n, p in sorted(files.items())
+                                             if Path(p).is_file()},
+            "episodes_path": str(episodes_path) if episodes_path is not None else None}
+
+
+def identity_config(config: dict) -> dict:
+    """The resolved config without the cosmetic keys."""
+    return {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
+
+
+def run_identity(config: dict, scene: dict) -> dict:
+    """`{"hash", "config", "scene"}`; `hash` (16 hex) covers both."""
+    cfg = identity_config(config)
+    return {"hash": _digest({"config": cfg, "scene": scene})[:16], "config": cfg, "scene": scene}
+
+
+def _flatten(d, prefix="") -> dict:
+    if not isinstance(d, dict):
+        return {prefix.rstrip("."): d}
+    out = {}
+    for k, v in d.items():
+        out.update(_flatten(v, f"{prefix}{k}."))
+    return out
+
+
+def identity_diff(old: dict, new: dict, limit: int = 8) -> list[str]:
+    """Human-readable differences `key: old -> new` between two identities."""
+    a = _flatten({"config": old.get("config", {}), "scene": old.get("scene", {})})
+    b = _flatten({"config": new.get("config", {}), "scene": new.get("scene", {})})
+    diffs = [f"{k}: {a.get(k, '<absent>')!r} -> {b.get(k, '<absent>')!r}" for k in sorted(set(a) | set(b))
+             if a.get(k) != b.get(k)]
+    return diffs[:limit] + ([f"... and {len(diffs) - limit} more"] if len(diffs) > limit else [])
+
+
+def check_resume(stored: dict | None, current: dict, where: Path, fresh_hint: str) -> None:
+    """Refuse to continue a run made by another identity (`stored` None: an old run without one)."""
+    if stored is None:
+        raise RunIdentityError(f"{where}: holds a run without a recorded identity (made by an older version); "
+                               f"{fresh_hint}")
+    if stored.get("hash") != current["hash"]:
+        lines = "\n  ".join(identity_diff(stored, current))
+        raise RunIdentityError(f"{where}: holds run {stored.get('hash')}, this is run {current['hash']}; "
+                               f"they differ in:\n  {lines}\n{fresh_hint}")

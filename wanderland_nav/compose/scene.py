@@ -1,0 +1,65 @@
+"""Config -> a prepared `Scene` and its episodes, the same way for every entry point."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
+from wanderland_nav.scene import load_scene, make_demo_scene
+from wanderland_nav.scene.loader import SCENE_MARKERS, is_scene_folder
+from wanderland_nav.scene_preparation import prepare_scene
+
+log = logging.getLogger(__name__)
+
+
+def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
+    """Where the scene lives; the demo is made there on first use (idempotent). A non-default demo
+    preset gets its own folder beside the default one (`<path>_<preset>`)."""
+    path = Path(scene.path)
+    if scene.demo:
+        preset = demo_preset or scene.preset
+        path = path if preset == "default" else Path(f"{path}_{preset}")
+        t = time.perf_counter()
+        make_demo_scene(path, seed=scene.seed, preset=preset)
+        log.info("demo scene (%s) ready at %s (%.1fs)", preset, path, time.perf_counter() - t)
+    elif not is_scene_folder(path):
+        raise FileNotFoundError(f"scene.path={path}: not a scene folder (none of {', '.join(SCENE_MARKERS)})")
+    return path
+
+
+def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, demo_preset: str | None = None,
+                   force: bool = False, bake_navmesh: bool = True, prepare: bool | None = None):
+    """The loaded Scene with collision mesh and navmesh built from `navigation` (skipped when up to
+    date); with `prepare` (default `navigation.prepare`) false, a non-demo scene's artefacts on disk
+    are used as they are."""
+    path = scene_folder(scene, demo_preset)
+    prepare = navigation.prepare if prepare is None else prepare
+    if not (prepare or scene.demo or force):
+        return load_scene(path, up_axis=scene.up_axis)
+    return prepare_scene(path, force=force, collision=navigation.collision, navmesh=navigation.navmesh,
+                         up_axis=scene.up_axis, bake_navmesh=bake_navmesh)
+
+
+def scene_episodes(scene, path: str | None, *, num: int, seed: int, generator) -> tuple[object, Path]:
+    """(scene, episodes file): `path` when given, else the scene's `episodes.json`, generated with
+    `generator` (`GeneratorSettings`) when missing. The returned scene records that file."""
+    if path is not None:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"episodes={path}: no such file")
+        return scene, Path(path)
+    if scene.episodes_path is not None and Path(scene.episodes_path).is_file():
+        return scene, Path(scene.episodes_path)
+    from planners import NavMesh
+    from wanderland_nav.episodes.generate import write_scene_episodes
+
+    if scene.navmesh_path is None:
+        raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
+                                f"(python -m wanderland_nav.prepare scene={scene.root})")
+    out = Path(scene.root) / "episodes.json"
+    t = time.perf_counter()
+    write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=num, seed=seed, settings=generator)
+    log.info("generated %d episodes -> %s (%.1fs)", num, out, time.perf_counter() - t)
+    scene.episodes_path = out
+    return scene, out

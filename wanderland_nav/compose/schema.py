@@ -1,0 +1,262 @@
+"""The typed shape of every entry point's config: Hydra's YAML merged onto these dataclasses.
+
+Why: a typo or a wrong type in a YAML file or on the command line must fail before anything runs,
+with the key named (`Key 'widht' not in 'CameraConfig' / full_key: env.camera.widht`), instead of
+falling back to a default. The library dataclasses (`NavEnvConfig`, `CollisionSettings`,
+`NavMeshSettings`, `BCConfig`, `PPOConfig`, `GeneratorSettings`, `FitConfig`) are used as they
+are, so there is no second, hand-written copy of their fields. `typed_config` is the one
+conversion; OmegaConf checks keys and types, the dataclasses' own `__post_init__` checks ranges.
+
+The `policy` node stays a plain mapping: each architecture has its own fields and
+`policies.make_policy` rejects unknown ones with the field named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+from omegaconf import DictConfig, OmegaConf
+
+from planners import NavMeshSettings
+from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
+from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.gsfit.trainer import FitConfig
+from wanderland_nav.rl.bc import BCConfig
+from wanderland_nav.rl.ppo import PPOConfig
+from wanderland_nav.scene.collision import CollisionSettings
+
+
+# ------------------------------------------------------------------------------ shared groups
+@dataclass
+class SceneGroup:
+    """`conf/scene/*.yaml`: the procedural demo (`demo: true`) or a scene folder (`scene=<path>`)."""
+
+    name: str = "demo"
+    path: str = "data/scenes/demo"
+    demo: bool = False
+    seed: int = 0  # demo only
+    preset: str = "default"  # demo only: "tiny" | "default"
+    up_axis: Optional[str] = None  # null: the scene's own (scene_meta.json, else its layout's convention)
+
+
+@dataclass
+class NavigationGroup:
+    """`conf/navigation/default.yaml`: how a scene becomes walkable. Composed by prepare, train,
+    evaluate and make_episodes alike, so the agent radius has one home."""
+
+    prepare: bool = True  # build/refresh collision mesh + navmesh with these settings before use
+    collision: CollisionSettings = field(default_factory=CollisionSettings)
+    navmesh: NavMeshSettings = field(default_factory=NavMeshSettings)  # up_axis: always the scene's
+
+
+# ------------------------------------------------------------------------------ train
+@dataclass
+class BCStage(BCConfig):
+    enabled: bool = True
+
+
+@dataclass
+class PPOStage(PPOConfig):
+    enabled: bool = True
+
+
+@dataclass
+class AlgoGroup:
+    name: str = "rl"
+    bc: BCStage = field(default_factory=BCStage)
+    ppo: PPOStage = field(default_factory=PPOStage)
+
+
+@dataclass
+class LoggerGroup:
+    kind: str = "console"  # console | rerun
+    print_every: int = 1  # console
+    rollout_every: int = 5  # rerun
+    max_agents: int = 2  # rerun
+    spawn: bool = False  # rerun
+
+
+@dataclass
+class CollectorGroup:
+    num_workers: int = 1
+
+
+@dataclass
+class EpisodeSource:
+    path: Optional[str] = None  # an episodes.json instead of <scene>/episodes.json
+    num: int = 100  # generated when the scene has none
+    seed: int = 0
+    goal_images: bool = False
+
+
+@dataclass
+class RenderSettings:
+    max_gaussians: Optional[int] = 10000  # level of detail (render/lod.py); null: all
+    image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
+
+
+@dataclass
+class TrainEnvSettings:
+    batch_size: int = 8
+    split: Optional[str] = "train"
+
+
+@dataclass
+class EvalSettings:
+    split: Optional[str] = "val"
+    episodes: Optional[int] = None
+    batch_size: int = 10
+    deterministic: bool = True
+
+
+@dataclass
+class TrainConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    policy: Dict[str, Any] = field(default_factory=dict)
+    algo: AlgoGroup = field(default_factory=AlgoGroup)
+    collector: CollectorGroup = field(default_factory=CollectorGroup)
+    logger: LoggerGroup = field(default_factory=LoggerGroup)
+    exp_name: str = "run"
+    seed: int = 0
+    device: str = "cpu"
+    threads: Optional[int] = None
+    progress: bool = True
+    run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
+    init_checkpoint: Optional[str] = None
+    demo_preset: str = "tiny"
+    save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
+    episodes: EpisodeSource = field(default_factory=EpisodeSource)
+    render: RenderSettings = field(default_factory=RenderSettings)
+    train_env: TrainEnvSettings = field(default_factory=TrainEnvSettings)
+    eval: EvalSettings = field(default_factory=EvalSettings)
+
+
+# ------------------------------------------------------------------------------ evaluate
+@dataclass
+class EvaluateConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    reference: Optional[str] = "expert"  # expert | random (ignored when checkpoints are given)
+    expert_path_source: str = "reference"  # expert: episode's reference_path | navmesh (fresh find_path)
+    render_for_reference: bool = False  # the references never look; true renders anyway
+    episodes: Optional[str] = None
+    demo_episodes: int = 60
+    split: Optional[str] = None
+    num_episodes: Optional[int] = None
+    checkpoints: Optional[List[str]] = None
+    batch_size: int = 8
+    device: str = "cpu"
+    seed: int = 0
+    out: Optional[str] = None
+    progress: bool = True
+    save_rollouts: Optional[str] = None
+    save_frames: bool = False
+
+
+# ------------------------------------------------------------------------------ prepare / make_episodes
+@dataclass
+class PrepareConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    force: bool = False
+    navmesh_enabled: bool = True
+
+
+@dataclass
+class MakeEpisodesConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    scenes: Optional[List[str]] = None  # several scenes / a folder of scenes (scene=[a,b])
+    num_episodes: int = 100
+    seed: int = 0
+    out: Optional[str] = None
+    force: bool = False
+    workers: Optional[int] = None
+    scenes_root: str = "data/scenes"
+    topdown: bool = True
+    progress: bool = True
+    generator: GeneratorSettings = field(default_factory=GeneratorSettings)
+
+
+# ------------------------------------------------------------------------------ replay / fit
+@dataclass
+class ReplayConfig:
+    rollout: Optional[str] = None
+    episodes: Optional[str] = None
+    scene_path: Optional[str] = None
+    out: Optional[str] = None
+    viewer: bool = False
+    frames: str = "auto"  # auto | render | none
+    max_gaussians: Optional[int] = None
+    agents: Optional[List[int]] = None
+    max_episodes: int = 8
+    max_points: int = 50000
+    max_cameras: int = 32
+    frame_chunk: int = 64
+    device: str = "cpu"
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    num_waypoints: int = 5
+    path_stride: int = 1
+    control_period: float = 0.5
+
+
+@dataclass
+class LpipsPaths:
+    backbone_path: Optional[str] = None
+    lin_path: Optional[str] = None
+
+
+@dataclass
+class FitRunConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    out_dir: Optional[str] = None  # null: outputs/fit/<scene>/<run identity hash>
+    resume: bool = True
+    evaluate: bool = True
+    eval_max_views: Optional[int] = 24
+    export_to_scene: bool = False
+    log_every: int = 50
+    rerun: bool = False
+    progress: bool = True
+    threads: Optional[int] = None
+    lpips: LpipsPaths = field(default_factory=LpipsPaths)
+    fit: FitConfig = field(default_factory=FitConfig)
+
+
+SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
+           "replay": ReplayConfig, "fit": FitRunConfig}
+
+
+def typed_config(cfg: DictConfig | dict, schema: type):
+    """The composed config as `schema`'s dataclasses; an unknown key or a wrong type raises with its
+    full key (`env.camera.widht`), a range error with the dataclass field (from `__post_init__`)."""
+    node = _writable(OmegaConf.structured(schema))
+    return _tuples(OmegaConf.to_object(OmegaConf.merge(node, cfg)))
+
+
+def _tuples(obj):
+    """OmegaConf returns lists for `tuple[...]` fields; give the dataclasses their tuples back (hashable,
+    equal to the defaults)."""
+    if dataclasses.is_dataclass(obj):
+        for f in dataclasses.fields(obj):
+            value = getattr(obj, f.name)
+            if isinstance(value, list) and str(f.type).startswith(("tuple", "Tuple")):
+                object.__setattr__(obj, f.name, tuple(value))  # frozen dataclasses too
+            else:
+                _tuples(value)
+    return obj
+
+
+def _writable(node: DictConfig) -> DictConfig:
+    """Frozen library dataclasses become read-only nodes; clear the flag on each so the YAML can be
+    merged in (`to_object` still builds the frozen objects)."""
+    OmegaConf.set_readonly(node, False)
+    for key in node:
+        child = node._get_node(key)
+        if isinstance(child, DictConfig):
+            _writable(child)
+    return node

@@ -1,0 +1,74 @@
+"""`train`'s composition: config -> a `Recipe` of loaded parts in an identity-checked run folder."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import torch
+
+from wanderland_nav.compose.build import (env_factory, load_navmesh, make_logger, make_policy_from_config,
+                                          scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
+from wanderland_nav.compose.scene import prepared_scene, scene_episodes
+from wanderland_nav.compose.schema import TrainConfig
+from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.rl.recipe import Recipe
+
+log = logging.getLogger("wanderland_nav.train")
+
+
+def default_run_dir(c: TrainConfig, identity: dict) -> Path:
+    """`outputs/<experiment>/<identity hash[:8]>_seed<seed>`: a sweep value or a scene gets its own folder."""
+    return Path("outputs") / c.exp_name / f"{identity['hash'][:8]}_seed{c.seed}"
+
+
+def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
+    """The run folder; one holding a checkpoint of another identity is refused with what differs."""
+    run_dir = Path(c.run_dir) if c.run_dir else default_run_dir(c, identity)
+    last = run_dir / "checkpoints" / "last.pt"
+    if last.is_file():
+        from wanderland_nav.rl.checkpoint import load_checkpoint
+
+        stored = (load_checkpoint(last).get("config") or {}).get("identity")
+        check_resume(stored, identity, run_dir, f"start fresh with another run_dir= (or leave run_dir unset), "
+                                                f"or delete {run_dir}")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir
+
+
+def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, object]:
+    """(Recipe, scene). `config`: the resolved config as a plain dict (stored in checkpoints);
+    `evaluate(name, policy, env, step, logger, episodes_path)` runs one evaluation."""
+    torch.manual_seed(c.seed)
+    if c.threads:
+        torch.set_num_threads(c.threads)
+    scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
+    scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
+                                          generator=GeneratorSettings(goal_images=c.episodes.goal_images))
+    identity = run_identity(config, scene_identity(scene.root, episodes_path))
+    run_dir = checked_run_dir(c, identity)
+    policy = make_policy_from_config(c.policy, c.device)
+    env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
+    parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
+                 gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
+    eval_env = env_factory(scene, episodes_path, env_cfg, split=c.eval.split, batch_size=c.eval.batch_size, **parts)()
+    env_fn = env_factory(scene, episodes_path, env_cfg, split=c.train_env.split, batch_size=c.train_env.batch_size,
+                         **parts)
+    logger = make_logger(c.logger, run_dir, scene)
+    first = "untrained"
+    if c.init_checkpoint:
+        from wanderland_nav.rl.checkpoint import load_policy_weights
+
+        load_policy_weights(policy, c.init_checkpoint)
+        policy.pretrained_from = str(c.init_checkpoint)
+        first = "init"
+    elif getattr(policy, "pretrained_from", None) is None:
+        log.info("policy %s: randomly initialised (no init_checkpoint)", c.policy.get("name"))
+    bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
+    recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, nav_from_scene=scene.nav_from_scene, bc=bc,
+                    ppo=c.algo.ppo if c.algo.ppo.enabled else None,
+                    evaluate=lambda name, pol, env, step: evaluate(name, pol, env, step, logger, episodes_path),
+                    logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
+                    num_workers=c.collector.num_workers, progress=c.progress, first_row=first)
+    return recipe, scene

@@ -1,0 +1,106 @@
+"""The training recipe on loaded parts: evaluate -> behaviour cloning -> evaluate -> PPO -> evaluate.
+
+Every phase is skipped when its artefact exists (checkpoint phase, result row), so killing a run and
+starting it again resumes. Result rows carry the run identity; a row made by another identity is
+never reused (the caller refuses such a run folder before we get here).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.rl.bc import BCConfig, ExpertPaths, train_bc
+from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
+from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
+
+log = logging.getLogger("wanderland_nav.train")
+
+
+@dataclass
+class Recipe:
+    """What one training run does (all loaded, nothing read from a config here)."""
+
+    policy: Any
+    eval_env: Any
+    env_fn: Callable[[], Any]  # picklable, for collector workers
+    nav_from_scene: Any  # [3, 3] for the expert paths
+    bc: BCConfig | None  # None: no BC phase
+    ppo: PPOConfig | None  # None: no PPO phase
+    evaluate: Callable  # (name, policy, env, step) -> EvaluationResult
+    logger: Any
+    run_dir: Path
+    config: dict  # stored in checkpoints
+    identity: dict
+    seed: int = 0
+    num_workers: int = 1
+    progress: bool = True
+    first_row: str = "untrained"
+
+
+def _load_results(path: Path, state, identity_hash: str) -> dict:
+    if state is None or not path.is_file():
+        return {}
+    rows = json.loads(path.read_text())
+    return {k: v for k, v in rows.items() if v.get("identity") == identity_hash}
+
+
+def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
+    """-> (results {row: {"summary", "records", "seconds", "identity"}}, rows in table order)."""
+    ckpt = Checkpointer(r.run_dir / "checkpoints")
+    state = ckpt.resume()
+    results_path = r.run_dir / "results.json"
+    results = _load_results(results_path, state, r.identity["hash"])
+    phase = state.get("phase") if state else None
+    save_kw = dict(config={**r.config, "identity": r.identity})
+
+    def evaluate(name: str, step: int) -> None:
+        if name in results:
+            return
+        r.policy.eval()
+        t = time.perf_counter()
+        res = r.evaluate(name, r.policy, r.eval_env, step)
+        results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
+                         "identity": r.identity["hash"]}
+        atomic_write_json(results_path, results)
+        o = res.summary["overall"]
+        r.logger.log_scalars({f"eval/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)
+        log.info("eval %s: NE %.2f SR %.3f SPL %.3f IR %.3f (%d episodes, %.1fs)", name, o["NE"], o["SR"], o["SPL"],
+                 o["IR"], o["episodes"], time.perf_counter() - t)
+
+    evaluate(r.first_row, 0)
+    rows = [r.first_row]
+    if r.bc is not None:
+        if phase in ("bc_done", "ppo", "ppo_done"):
+            r.policy.load_state_dict(state["policy"])
+            log.info("BC already done; loaded its weights")
+        else:
+            train_env = r.env_fn()
+            paths = ExpertPaths.from_episodes(train_env.episodes, r.nav_from_scene)
+            stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed, progress=r.progress)
+            train_env.close()
+            bc_kw = dict(policy=r.policy, optimizer=None, counters={"bc_updates": r.bc.updates_per_round},
+                         phase="bc_done", extra={"bc": stats}, **save_kw)
+            save_checkpoint(ckpt.dir / "bc.pt", **bc_kw)  # kept: PPO overwrites last.pt; init_checkpoint=<this>
+            ckpt.save(0, **bc_kw)
+            phase = "bc_done"
+        evaluate("BC", 0)
+        rows.append("BC")
+    if r.ppo is not None:
+        trainer = PPOTrainer(r.policy, r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
+                             seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
+        if phase in ("ppo", "ppo_done"):
+            trainer.restore(state)
+            log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)
+        trainer.train()
+        name = "BC+RL" if r.bc is not None else "RL"
+        evaluate(name, trainer.frames)
+        rows.append(name)
+    if r.ppo is None and r.bc is None and state is None:
+        save_checkpoint(ckpt.last, policy=r.policy, optimizer=None, counters={}, phase="done", **save_kw)
+    return results, rows
