@@ -73,7 +73,7 @@ def test_typos_and_wrong_types_fail_at_compose_time_with_the_key_named(primary):
 
     from wanderland_nav.compose import SCHEMAS, typed_config
 
-    wrong_key = "max_points" if primary == "replay" else "scene.seed"  # replay has no scene group
+    wrong_key = {"replay": "max_points", "recon_eval": "max_time_diff"}.get(primary, "scene.seed")  # no scene group
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         typo = compose(primary, overrides=["+seeed=1"])
         wrong = compose(primary, overrides=[f"{wrong_key}=many"])

@@ -92,6 +92,9 @@ def _hydra_output_dir() -> Path:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="recon_eval")
 def main(cfg: DictConfig) -> None:
+    from wanderland_nav.compose import SCHEMAS, typed_config
+
+    typed_config(cfg, SCHEMAS["recon_eval"])  # a typo or a wrong type fails here, with the key named
     run(OmegaConf.to_container(cfg, resolve=True))
 
 

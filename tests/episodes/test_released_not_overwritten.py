@@ -54,17 +54,19 @@ def test_released_episodes_are_left_untouched_unless_forced(demo, tmp_path, capl
     assert forced.out == str(out) and json.loads(out.read_text())["generator"]["seed"] == 0
 
 
-def test_expert_entry_point_force_reaches_the_library(prepared_demo_scene, tmp_path):
+def test_make_episodes_entry_point_force_reaches_the_library(prepared_demo_scene, tmp_path):
     from hydra import compose, initialize_config_dir
 
-    from wanderland_nav.expert import CONF_DIR, run
+    from wanderland_nav.make_episodes import run
+
+    CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
     out = tmp_path / "episodes.json"
     shutil.copy(RELEASED, out)
     with initialize_config_dir(version_base="1.3", config_dir=str(CONF_DIR)):
-        cfg = compose("expert", overrides=[f"scenes={prepared_demo_scene}", f"out={out}", "num_episodes=2",
+        cfg = compose("make_episodes", overrides=[f"scenes=[{prepared_demo_scene}]", f"out={out}", "num_episodes=2",
                                            "generator.goal_images=false", "topdown=false", "progress=false",
-                                           "prepare=false"])
+                                           "navigation.prepare=false"])
     (s,) = run(cfg)
     assert s.out == str(tmp_path / "episodes.generated.json") and out.read_bytes() == RELEASED.read_bytes()
     cfg.force = True

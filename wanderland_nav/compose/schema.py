@@ -227,8 +227,29 @@ class FitRunConfig:
     fit: FitConfig = field(default_factory=FitConfig)
 
 
+@dataclass
+class ReconEvalConfig:
+    pred: Optional[str] = None
+    gt: Optional[str] = None
+    name: Optional[str] = None
+    max_time_diff: float = 0.01
+    time_offset: float = 0.0
+    rpe_delta: int = 1
+    collinear_tol: float = 1e-9
+    chunk_pairs: int = 65536
+    device: str = "cpu"
+    out: Optional[str] = None
+    plot: bool = True
+    rerun: bool = True
+    nvs: Optional[str] = None
+    nvs_split: str = "val"
+    nvs_holdout_every: int = 8
+    nvs_downscale: float = 1.0
+    lpips: LpipsPaths = field(default_factory=LpipsPaths)
+
+
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
-           "replay": ReplayConfig, "fit": FitRunConfig}
+           "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig}
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):

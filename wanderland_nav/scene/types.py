@@ -99,6 +99,11 @@ class Scene:
             return np.zeros((0, 3))
         return np.stack([c.world_from_cam[:3, 3] for c in cams]).astype(np.float64)
 
+    def world_from_cams(self, split: str | None = None) -> np.ndarray:
+        """All poses stacked `[M,4,4]` float64 (scene frame, OpenCV camera axes)."""
+        cams = [c for c in self.cameras if split is None or c.split == split]
+        return np.stack([c.world_from_cam for c in cams]) if cams else np.zeros((0, 4, 4))
+
     def is_indoor(self, points_scene) -> np.ndarray:
         """`bool[...]` for scene-frame points `[..., 3]`: inside any indoor region (nav-frame
         polygon in x,y and z_min <= z <= z_max). Scenes tagged "indoor" with no regions are all indoor."""
