@@ -22,6 +22,8 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from wanderland_nav.scene.loader import scene_layout
+
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 #: files whose presence marks a folder as a scene folder (any one of them)
 SCENE_MARKERS = ("scene_meta.json", "navmesh.npz", "sparse", "transforms.json", "raw_pcd.ply", "3dgs.ply")
@@ -39,7 +41,7 @@ class ScenePlan:
 
 
 def is_scene_folder(p: Path) -> bool:
-    return p.is_dir() and any((p / m).exists() for m in SCENE_MARKERS)
+    return scene_layout(p) is not None or (p.is_dir() and any((p / m).exists() for m in SCENE_MARKERS))
 
 
 def resolve_scenes(cfg: DictConfig) -> list[ScenePlan]:
@@ -131,7 +133,7 @@ def process_scene(plan: ScenePlan, *, num_episodes: int, seed: int, settings, fo
 
         png = out.with_name(out.name.split(".")[0] + "_topdown.png")
         if not (summary.skipped and png.is_file()):
-            plot_topdown(png, nav_from_scene=scene.nav_from_scene, camera_centers=scene.camera_centers(),
+            plot_topdown(png, nav_from_scene=scene.nav_from_scene, camera_centers=scene.capture_positions(),
                          episodes=episodes, navmesh=navmesh, seed=seed,
                          title=f"{scene.name}: {len(episodes)} episodes (seed {seed})")
     return summary

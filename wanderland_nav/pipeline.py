@@ -72,13 +72,7 @@ def _up_to_date(output: Path, inputs: list[Path], settings_hash: str) -> bool:
 def capture_positions(scene: Scene) -> np.ndarray:
     """Scene-frame positions `[M,3]` of the capture trajectory: camera centres, else the v2
     `lidar/poses.txt` sensor positions, else none (the cloud is then used uncropped)."""
-    if scene.cameras:
-        return scene.camera_centers()
-    poses = scene.root / "lidar" / "poses.txt"
-    if poses.is_file():
-        rows = np.loadtxt(poses, ndmin=2)
-        return rows.reshape(-1, 3, 4)[:, :, 3]
-    return np.zeros((0, 3))
+    return scene.capture_positions()
 
 
 def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bool = False) -> tuple[Path, dict]:
@@ -100,7 +94,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
             "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
-            "skipped": False}
+            "ground_fill": meta.get("ground_fill"), "skipped": False}
     atomic_write_json(_sidecar(out), side)
     return out, side
 

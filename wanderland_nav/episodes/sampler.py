@@ -95,7 +95,8 @@ class EndpointSampler:
         self.R_ns = np.asarray(nav_from_scene, dtype=np.float64)  # [3, 3]
         cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3)  # [M, 3] scene frame
         if len(cams) == 0:
-            raise ValueError("EndpointSampler: the scene has no capture cameras to sample around")
+            raise ValueError("EndpointSampler: the scene has no capture positions to sample around (no cameras, "
+                             "no lidar/poses.txt): episodes start near the capture trajectory")
         self.cams_nav = cams @ self.R_ns.T  # [M, 3] nav frame
         # ground height under every camera: the navmesh point closest to the camera centre. Cameras
         # whose nearest ground is not below them within camera_max_drop (e.g. above a hole) are unusable.

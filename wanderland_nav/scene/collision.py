@@ -1,6 +1,6 @@
 """Collision mesh from a metric point cloud: the Wanderland paper's recipe.
 
-crop to the capture corridor -> voxel occupancy -> marching cubes -> drop small components.
+crop to the capture corridor -> voxel occupancy -> ground infill -> marching cubes -> drop small components.
 
 Why each step:
 * **crop** — LiDAR sees far beyond where an agent can go (building facades 80 m away, sky returns,
@@ -10,6 +10,9 @@ Why each step:
 * **voxel occupancy** — turns an unstructured, noisy cloud into a watertight-able field; voxels
   with fewer than `min_points_per_voxel` hits are noise; an optional morphological closing
   (`close_iterations`) bridges the gaps between LiDAR rings.
+* **ground infill** (`scene.ground`) — a LiDAR sees no ground under itself and a sparse one sees the
+  road only as rings; ground columns bounded by observed ground on all sides are filled from a height
+  field fitted between the ground returns, never across an observed obstacle (`ground_fill`).
 * **marching cubes** (scikit-image) on the occupancy at level 0.5 ("ascent": outward winding, positive
   volume): each occupied layer becomes a
   thin closed slab whose faces sit half a voxel from the scanned surface, normals pointing out.
@@ -42,6 +45,7 @@ from scipy.spatial import cKDTree
 from skimage.measure import marching_cubes
 
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
+from wanderland_nav.scene.ground import fill_ground
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +65,13 @@ class CollisionSettings:
     drop_tops_above_capture: float | None = 0.5
     min_points_per_voxel: int = 1
     close_iterations: int = 1  # binary closing (6-connected) to bridge scan-line gaps; 0 = off
+    # Ground infill (`scene.ground.fill_ground`): fill ground columns LiDAR missed (the blind spot under
+    # the sensor, the gaps between sparse rings) where observed ground bounds them on all sides.
+    ground_fill: bool = True
+    ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
+    ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
+    ground_max_rise: float = 0.3  # a column is ground within this of that lowest voxel (m)
+    ground_clearance: float = 2.0  # returns up to this high above ground make a column an obstacle (m)
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
     chunk_points: int = 1_000_000  # points processed per batch (memory bound)
 
@@ -248,6 +259,14 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     grid = np.zeros(tuple(dims), dtype=bool)
     loc = ijk - imin + pad
     grid[loc[:, 0], loc[:, 1], loc[:, 2]] = True
+    if cfg.ground_fill:
+        fill = fill_ground(loc, dims, vox, max_gap=cfg.ground_max_gap, window=cfg.ground_window,
+                           max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance)
+        grid[fill.voxels[:, 0], fill.voxels[:, 1], fill.voxels[:, 2]] = True
+        meta["ground_fill"] = {"filled_area_m2": fill.filled_area_m2, "ground_columns": fill.ground_columns,
+                               "obstacle_columns": fill.obstacle_columns}
+        log.info("ground infill: %.1f m2 added between %d ground columns (%d obstacle columns)",
+                 fill.filled_area_m2, fill.ground_columns, fill.obstacle_columns)
     if cfg.close_iterations > 0:
         grid = ndi.binary_closing(grid, iterations=cfg.close_iterations)
     timings["grid_s"] = time.perf_counter() - t2
