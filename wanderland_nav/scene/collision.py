@@ -69,9 +69,10 @@ class CollisionSettings:
     # the sensor, the gaps between sparse rings) where observed ground bounds them on all sides.
     ground_fill: bool = True
     ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
-    ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
-    ground_max_rise: float = 0.3  # a column is ground within this of that lowest voxel (m)
+    ground_window: float = 5.0  # neighbourhood (m) whose lowest voxel defines "ground"
+    ground_max_rise: float = 0.25  # a column is ground within this of that lowest voxel (m)
     ground_clearance: float = 2.0  # returns up to this high above ground make a column an obstacle (m)
+    ground_bridge: float = 6.0  # fills may span connected obstacles up to this long (a parked car), not walls
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
     chunk_points: int = 1_000_000  # points processed per batch (memory bound)
 
@@ -261,7 +262,8 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     grid[loc[:, 0], loc[:, 1], loc[:, 2]] = True
     if cfg.ground_fill:
         fill = fill_ground(loc, dims, vox, max_gap=cfg.ground_max_gap, window=cfg.ground_window,
-                           max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance)
+                           max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance,
+                           bridge_size=cfg.ground_bridge)
         grid[fill.voxels[:, 0], fill.voxels[:, 1], fill.voxels[:, 2]] = True
         meta["ground_fill"] = {"filled_area_m2": fill.filled_area_m2, "ground_columns": fill.ground_columns,
                                "obstacle_columns": fill.obstacle_columns}

@@ -16,7 +16,10 @@ The rule (all in the nav frame, one voxel column = one (i, j) cell of the grid):
    ground (their own ground voxel, else the window's lowest). A column can be both ground and obstacle
    (a wall's foot); it is then an obstacle.
 3. **fit**: Delaunay triangulation (xy) of the ground columns that are not obstacles; a triangle is kept
-   when all its edges are at most `max_gap` metres and no obstacle column centre lies inside it. Every
+   when all its edges are at most `max_gap` metres and none of its edges passes through a connected
+   obstacle longer than `bridge_size` metres (a wall or fence between its corners: the far side is another
+   place). Shorter obstacles (a parked car between two LiDAR rings, a pole) may be spanned: the road
+   around them was seen. Obstacle columns themselves are never filled. Every
    other column (no ground voxel, not an obstacle) whose centre falls in a kept triangle gets one ground
    voxel at the linear interpolation of the triangle's ground heights.
 
@@ -55,8 +58,36 @@ def column_floor(ijk: np.ndarray, nx: int, ny: int) -> np.ndarray:
     return floor.reshape(nx, ny)
 
 
-def fill_ground(ijk: np.ndarray, dims, voxel_size: float, *, max_gap: float = 10.0, window: float = 3.0,
-                max_rise: float = 0.3, clearance: float = 2.0) -> GroundFill:
+def _long_obstacles(obstacle: np.ndarray, max_extent: float) -> np.ndarray:
+    """`bool [nx, ny]`: the obstacle columns (dilated by one cell) of connected obstacles longer than
+    `max_extent` cells: walls, fences and rows of cars, which fills must not cross. Shorter ones (a
+    parked car, a pole, a bin) stand on ground seen around them and may be spanned."""
+    grown = ndi.binary_dilation(obstacle, structure=np.ones((3, 3), bool))
+    label, n = ndi.label(grown, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return grown
+    boxes = ndi.find_objects(label)
+    extent = np.array([max(b[0].stop - b[0].start, b[1].stop - b[1].start) for b in boxes])
+    return np.concatenate([[False], extent > max_extent])[label]
+
+
+def _edges_cross(corners: np.ndarray, blocked: np.ndarray, step: float = 0.5) -> np.ndarray:
+    """`bool [T]`: any edge of the triangles `corners [T, 3, 2]` (cell coordinates) passes through a
+    `blocked [nx, ny]` cell (sampled every `step` cells; callers dilate `blocked` so thin diagonal walls
+    cannot slip between samples)."""
+    if len(corners) == 0:
+        return np.zeros(0, dtype=bool)
+    a, b = corners, np.roll(corners, -1, axis=1)  # [T, 3, 2] edge ends
+    n = int(np.ceil(np.linalg.norm(b - a, axis=-1).max() / step)) + 1
+    t = np.linspace(0.0, 1.0, n)[:, None, None, None]  # [n, 1, 1, 1]
+    pts = np.rint(a + t * (b - a)).astype(np.int64)  # [n, T, 3, 2]
+    i = np.clip(pts[..., 0], 0, blocked.shape[0] - 1)
+    j = np.clip(pts[..., 1], 0, blocked.shape[1] - 1)
+    return blocked[i, j].any(axis=(0, 2))
+
+
+def fill_ground(ijk: np.ndarray, dims, voxel_size: float, *, max_gap: float = 10.0, window: float = 5.0,
+                max_rise: float = 0.25, clearance: float = 2.0, bridge_size: float = 6.0) -> GroundFill:
     """Ground voxels to add to the occupancy `ijk [V, 3]` (int grid indices, nav frame, z = k up) of a
     grid of shape `dims` with cubic voxels of `voxel_size` metres. See the module docstring for the rule."""
     nx, ny = int(dims[0]), int(dims[1])
@@ -96,8 +127,9 @@ def fill_ground(ijk: np.ndarray, dims, voxel_size: float, *, max_gap: float = 10
     keep = edges <= max_gap / v
     oi, oj = np.nonzero(obstacle)
     if oi.size:
-        hit = tri.find_simplex(np.stack([oi, oj], -1).astype(np.float64))
-        keep[hit[hit >= 0]] = False
+        hit = np.unique(tri.find_simplex(np.stack([oi, oj], -1).astype(np.float64)))
+        hit = hit[hit >= 0]
+        keep[hit[_edges_cross(corners[hit], _long_obstacles(obstacle, bridge_size / v))]] = False
 
     # candidate columns: no ground voxel and no obstacle, inside the ground's bounding box
     ci, cj = np.nonzero(~ground & ~obstacle)

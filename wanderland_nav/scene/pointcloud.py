@@ -395,7 +395,8 @@ _KITTI = "KITTI float32 x y z intensity"
 def _plausible_scan(rec: np.ndarray) -> bool:
     """Whether `[N, C]` records look like a real scan: finite x/y/z within 10 km, not mostly denormal
     (a float64 read as float32), and a non-negative intensity column (a shifted record puts x/y there)."""
-    xyz = rec[:, :3].astype(np.float64)
+    with np.errstate(invalid="ignore"):  # signalling NaNs in misread bytes
+        xyz = rec[:, :3].astype(np.float64)
     if not np.isfinite(xyz).all() or (np.abs(xyz) > 1e4).any():
         return False
     tiny = (np.abs(xyz) < 1e-20) & (xyz != 0)
