@@ -20,6 +20,7 @@ import numpy as np
 import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
+from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
 from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.model import Scene
@@ -120,6 +121,8 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     t0 = time.perf_counter()
     mesh = trimesh.load(cm, file_type="ply", process=False, force="mesh")
     nm = NavMesh.bake(mesh, settings)
+    if nm.area <= 0:  # never replace a cached navmesh with an empty one; say what to check
+        raise EmptyNavMeshError(empty_navmesh_reasons(scene, settings, cm_side))
     t_bake = time.perf_counter() - t0
     nm.save(out)  # NavMesh.save writes atomically
     islands = _island_summary(nm)
@@ -144,6 +147,7 @@ def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = C
     """Collision mesh then navmesh beside the scene (skipping what is up to date); returns the
     Scene (loaded once, output paths filled in) with `scene.meta["prepare"]` = the two sidecars (figures, timings, skipped flags)."""
     scene = load_scene(path, up_axis=up_axis)
+    check_up_axis(scene)
     cm_path, cm_side = build_collision_mesh(scene, collision, force=force)
     scene.collision_mesh_path = cm_path  # the loaded scene is otherwise unchanged: no second read
     report = {"collision_mesh": cm_side}
