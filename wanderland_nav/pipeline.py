@@ -21,7 +21,7 @@ import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
-from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh
+from wanderland_nav.scene.collision import CollisionSettings, crop_mesh_to_trajectory, extract_collision_mesh
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.model import Scene
 
@@ -87,7 +87,11 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
         side["skipped"] = True
         return out, side
     t0 = time.perf_counter()
-    mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
+    if settings.use_scene_mesh and scene.mesh_path is not None:  # v2: the shipped TSDF mesh, cropped
+        mesh = crop_mesh_to_trajectory(trimesh.load(scene.mesh_path, file_type="ply", process=False, force="mesh"),
+                                       capture_positions(scene), scene.up_axis, settings)
+    else:
+        mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
     meta = mesh.metadata.pop("collision")
     with atomic_path(out) as tmp:
         mesh.export(tmp, file_type="ply")

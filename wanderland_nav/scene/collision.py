@@ -73,6 +73,9 @@ class CollisionSettings:
     ground_max_rise: float = 0.25  # a column is ground within this of that lowest voxel (m)
     ground_clearance: float = 2.0  # returns up to this high above ground make a column an obstacle (m)
     ground_bridge: float = 6.0  # fills may span connected obstacles up to this long (a parked car), not walls
+    # v2 scenes ship `scene.ply` (a TSDF mesh): use it as the collision mesh (cropped like the points)
+    # instead of re-extracting one from the LiDAR. False: always extract from the points.
+    use_scene_mesh: bool = False
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
     chunk_points: int = 1_000_000  # points processed per batch (memory bound)
 
@@ -302,3 +305,25 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     log.info("collision mesh: %d/%d points kept, grid %s, %d faces (%d before filtering), %.2fs",
              meta["points_kept"], meta["points_in"], meta["grid_shape"], faces.shape[0], n_before, timings["total_s"])
     return mesh
+
+
+def crop_mesh_to_trajectory(mesh: trimesh.Trimesh, camera_centers, up_axis: str,
+                            settings: CollisionSettings) -> trimesh.Trimesh:
+    """A ready mesh (v2 `scene.ply`, scene frame) cropped like the points: faces whose centre lies within
+    `crop_radius` and `height_band` of the capture positions, then small components dropped."""
+    Rn = nav_from_scene_rotation(parse_up_axis(up_axis))
+    t0 = time.perf_counter()
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3)
+    keep = crop_to_trajectory((v[f].mean(1) @ Rn.T).astype(np.float32), cams @ Rn.T, settings.crop_radius,
+                              settings.height_band, settings.chunk_points)
+    v2, f2 = drop_small_components(v, f[keep], settings.min_component_faces)
+    out = trimesh.Trimesh(vertices=v2, faces=f2, process=False)
+    out.metadata["collision"] = {"settings": settings.as_dict(), "up_axis": up_axis, "source": "scene.ply",
+                                 "points_in": int(len(f)), "points_kept": int(keep.sum()), "grid_shape": [],
+                                 "timings": {"total_s": time.perf_counter() - t0}}
+    if len(f2) == 0:
+        raise ValueError(f"scene.ply: no faces left after cropping {len(f)} faces to radius {settings.crop_radius} m "
+                         f"around {len(cams)} capture positions (wrong up axis '{up_axis}'?)")
+    return out

@@ -274,8 +274,10 @@ def _cameras_from_colmap(root: Path, sdir: Path, tj: TransformsJson | None) -> l
 
 
 def _cameras_from_transforms(root: Path, tj: TransformsJson) -> list[Camera]:
-    """No COLMAP model: poses and intrinsics from transforms.json frames (converted to OpenCV axes)."""
-    images_dir = root / "images"
+    """No COLMAP model: poses and intrinsics from transforms.json frames (converted to OpenCV axes).
+    Images live in `images/` (v1) or `fisheye/` (v2 as released); frame paths may carry either prefix."""
+    images_dir = next((root / d for d in ("images", "fisheye", "images_fisheye") if (root / d).is_dir()),
+                      root / "images")
     mask_idx, depth_idx = _file_index(root / "images_mask", _MASK_EXTS), _file_index(root / "depth", _DEPTH_EXTS)
     cams = []
     frames = sorted({id(fr): fr for fr in tj.frames.values() if "transform_matrix" in fr}.values(),
