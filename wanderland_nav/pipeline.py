@@ -125,11 +125,11 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     t0 = time.perf_counter()
     mesh = trimesh.load(cm, file_type="ply", process=False, force="mesh")
     nm = NavMesh.bake(mesh, settings)
-    if nm.area <= 0:  # never replace a cached navmesh with an empty one; say what to check
-        raise EmptyNavMeshError(empty_navmesh_reasons(scene, settings, cm_side))
     t_bake = time.perf_counter() - t0
-    nm.save(out)  # NavMesh.save writes atomically
     islands = _island_summary(nm)
+    if sum(i["area"] for i in islands) <= 0:  # never replace a cached navmesh with an empty one; say why
+        raise EmptyNavMeshError(empty_navmesh_reasons(scene, settings, cm_side))
+    nm.save(out)  # NavMesh.save writes atomically
     side = {"settings_hash": h, "settings": settings.to_dict(), "collision_settings_hash": cm_side.get("settings_hash"),
             "islands": islands, "num_islands": len(islands), "area_m2": float(sum(i["area"] for i in islands)),
             "timings": {"bake_s": t_bake, "total_s": time.perf_counter() - t0}, "skipped": False}
