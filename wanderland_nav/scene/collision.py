@@ -69,8 +69,8 @@ class CollisionSettings:
     # the sensor, the gaps between sparse rings) where observed ground bounds them on all sides.
     ground_fill: bool = True
     ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
-    ground_window: float = 5.0  # neighbourhood (m) whose lowest voxel defines "ground"
-    ground_max_rise: float = 0.25  # a column is ground within this of that lowest voxel (m)
+    ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
+    ground_max_rise: float = 0.3  # a column is ground within this of that lowest voxel (m)
     ground_clearance: float = 2.0  # returns up to this high above ground make a column an obstacle (m)
     ground_bridge: float = 6.0  # fills may span connected obstacles up to this long (a parked car), not walls
     # v2 scenes ship `scene.ply` (a TSDF mesh): use it as the collision mesh (cropped like the points)

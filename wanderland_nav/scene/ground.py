@@ -71,23 +71,28 @@ def _long_obstacles(obstacle: np.ndarray, max_extent: float) -> np.ndarray:
     return np.concatenate([[False], extent > max_extent])[label]
 
 
-def _edges_cross(corners: np.ndarray, blocked: np.ndarray, step: float = 0.5) -> np.ndarray:
+def _edges_cross(corners: np.ndarray, blocked: np.ndarray, step: float = 0.5, end_margin: float = 2.0) -> np.ndarray:
     """`bool [T]`: any edge of the triangles `corners [T, 3, 2]` (cell coordinates) passes through a
     `blocked [nx, ny]` cell (sampled every `step` cells; callers dilate `blocked` so thin diagonal walls
     cannot slip between samples)."""
     if len(corners) == 0:
         return np.zeros(0, dtype=bool)
     a, b = corners, np.roll(corners, -1, axis=1)  # [T, 3, 2] edge ends
-    n = int(np.ceil(np.linalg.norm(b - a, axis=-1).max() / step)) + 1
+    length = np.linalg.norm(b - a, axis=-1)  # [T, 3] in cells
+    n = int(np.ceil(length.max() / step)) + 1
     t = np.linspace(0.0, 1.0, n)[:, None, None, None]  # [n, 1, 1, 1]
     pts = np.rint(a + t * (b - a)).astype(np.int64)  # [n, T, 3, 2]
     i = np.clip(pts[..., 0], 0, blocked.shape[0] - 1)
     j = np.clip(pts[..., 1], 0, blocked.shape[1] - 1)
-    return blocked[i, j].any(axis=(0, 2))
+    # samples within `end_margin` cells of a corner are ignored: a corner is observed ground, and ground
+    # seen right beside an obstacle (the dilated cells) says nothing about the far side
+    along = t[..., 0] * length[None]  # [n, T, 3] distance from the edge start
+    inner = (along > end_margin) & (along < length[None] - end_margin)
+    return (blocked[i, j] & inner).any(axis=(0, 2))
 
 
-def fill_ground(ijk: np.ndarray, dims, voxel_size: float, *, max_gap: float = 10.0, window: float = 5.0,
-                max_rise: float = 0.25, clearance: float = 2.0, bridge_size: float = 6.0) -> GroundFill:
+def fill_ground(ijk: np.ndarray, dims, voxel_size: float, *, max_gap: float = 10.0, window: float = 3.0,
+                max_rise: float = 0.3, clearance: float = 2.0, bridge_size: float = 6.0) -> GroundFill:
     """Ground voxels to add to the occupancy `ijk [V, 3]` (int grid indices, nav frame, z = k up) of a
     grid of shape `dims` with cubic voxels of `voxel_size` metres. See the module docstring for the rule."""
     nx, ny = int(dims[0]), int(dims[1])
