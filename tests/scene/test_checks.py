@@ -56,3 +56,14 @@ def test_prepare_refuses_an_empty_navmesh_and_keeps_the_cached_one(one_scan):
                                                  r"\(ground normals say \+z\).*crop_radius 8.0 m.*radius 0.6 m"):
         prepare_scene(one_scan, collision=small, up_axis="+y")
     assert good.read_bytes() == before
+
+
+def test_sampler_refuses_a_navmesh_baked_for_another_up_axis():
+    from types import SimpleNamespace
+
+    from wanderland_nav.episodes.sampler import EndpointSampler, SamplerSettings
+    from wanderland_nav.geometry import nav_from_scene_rotation
+
+    nm = SimpleNamespace(settings=SimpleNamespace(up_axis="+y"))
+    with pytest.raises(ValueError, match=r"navmesh was baked with up axis \+y.*re-run prepare"):
+        EndpointSampler(nm, np.zeros((1, 3)), nav_from_scene_rotation("+z"), SamplerSettings())
