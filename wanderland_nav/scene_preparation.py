@@ -16,11 +16,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.cache import json_digest, read_record
 from wanderland_nav.errors import WanderlandInputError
-from wanderland_nav.scene.collision import CollisionSettings, extract_collision_mesh, load_collision_mesh
+from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
+from wanderland_nav.scene.collision import (CollisionSettings, crop_mesh_to_trajectory, extract_collision_mesh,
+                                            load_collision_mesh)
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.scene.types import Scene
 
@@ -82,13 +85,7 @@ def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> b
 def capture_positions(scene: Scene) -> np.ndarray:
     """Scene-frame positions `[M,3]` of the capture trajectory: camera centres, else the v2
     `lidar/poses.txt` sensor positions, else none (the cloud is then used uncropped)."""
-    if scene.cameras:
-        return scene.camera_centers()
-    poses = scene.root / "lidar" / "poses.txt"
-    if poses.is_file():
-        rows = np.loadtxt(poses, ndmin=2)
-        return rows.reshape(-1, 3, 4)[:, :, 3]
-    return np.zeros((0, 3))
+    return scene.capture_positions()
 
 
 def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bool = False) -> tuple[Path, dict]:
@@ -107,7 +104,11 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
                                    f"(raw_pcd.ply, points3D or lidar/ scans; inputs found: "
                                    f"{[p.name for p in inputs]})", path=scene.root)
     t0 = time.perf_counter()
-    mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
+    if settings.use_scene_mesh and scene.mesh_path is not None:  # v2: the shipped TSDF mesh, cropped
+        mesh = crop_mesh_to_trajectory(trimesh.load(scene.mesh_path, file_type="ply", process=False, force="mesh"),
+                                       capture_positions(scene), scene.up_axis, settings)
+    else:
+        mesh = extract_collision_mesh(scene.points, capture_positions(scene), scene.up_axis, settings=settings)
     meta = mesh.metadata.pop("collision")
     with atomic_path(out) as tmp:
         mesh.export(tmp, file_type="ply")
@@ -115,7 +116,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
             "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
-            "skipped": False}
+            "ground_fill": meta.get("ground_fill"), "skipped": False}
     atomic_write_json(_sidecar(out), side)
     return out, side
 
@@ -142,8 +143,10 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
     mesh = load_collision_mesh(cm)
     nm = NavMesh.bake(mesh, settings)
     t_bake = time.perf_counter() - t0
-    nm.save(out)  # NavMesh.save writes atomically
     islands = _island_summary(nm)
+    if sum(i["area"] for i in islands) <= 0:  # never replace a cached navmesh with an empty one; say why
+        raise EmptyNavMeshError(empty_navmesh_reasons(scene, settings, cm_side))
+    nm.save(out)  # NavMesh.save writes atomically
     side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.to_dict(),
             "collision_settings_hash": cm_side.get("settings_hash"),
             "islands": islands, "num_islands": len(islands), "area_m2": float(sum(i["area"] for i in islands)),
@@ -166,6 +169,7 @@ def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = C
     """Collision mesh then navmesh beside the scene (skipping what is up to date); returns the
     Scene (loaded once, output paths filled in) with `scene.meta["prepare"]` = the two sidecars (figures, timings, skipped flags)."""
     scene = load_scene(path, up_axis=up_axis)
+    check_up_axis(scene)
     cm_path, cm_side = build_collision_mesh(scene, collision, force=force)
     scene.collision_mesh_path = cm_path  # the loaded scene is otherwise unchanged: no second read
     report = {"collision_mesh": cm_side}

@@ -39,7 +39,7 @@ def test_paths_lists_and_folders(tmp_path):
     root = tmp_path / "scenes"
     for n in ("a", "b"):
         (root / n).mkdir(parents=True)
-        (root / n / "scene_meta.json").write_text("{}")
+        (root / n / "raw_pcd.ply").write_bytes(b"")  # a v1 layout marker (is_scene_folder)
     (root / "not_a_scene").mkdir()
     plans = resolve_scenes(_cfg([f"scene={root}"]))
     assert [Path(p.scene.path).name for p in plans] == ["a", "b"]

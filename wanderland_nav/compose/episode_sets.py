@@ -9,7 +9,7 @@ from pathlib import Path
 
 from wanderland_nav.compose.schema import MakeEpisodesConfig, NavigationGroup, SceneGroup
 from wanderland_nav.compose.scene import prepared_scene
-from wanderland_nav.scene.loader import SCENE_MARKERS, is_scene_folder
+from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,7 @@ def _plans_for(item: str, c: MakeEpisodesConfig) -> list[ScenePlan]:
     if p.is_dir():
         subs = sorted(q for q in p.iterdir() if is_scene_folder(q))
         if not subs:
-            raise FileNotFoundError(f"scene={item}: {p} is neither a scene folder (none of {SCENE_MARKERS}) "
+            raise FileNotFoundError(f"scene={item}: {p} is neither a scene folder ({SCENE_LAYOUTS}) "
                                     "nor a folder of scene folders")
         return [ScenePlan(_folder(q, c)) for q in subs]
     raise FileNotFoundError(f"scene={item}: no such scene folder (also looked in {c.scenes_root}/)")
@@ -83,7 +83,7 @@ def process_scene(plan: ScenePlan, *, navigation: NavigationGroup, num_episodes:
     if topdown and not (summary.skipped and png.is_file()):
         from wanderland_nav.viz.topdown import plot_topdown
 
-        plot_topdown(png, nav_from_scene=scene.nav_from_scene, camera_centers=scene.camera_centers(),
+        plot_topdown(png, nav_from_scene=scene.nav_from_scene, camera_centers=scene.capture_positions(),
                      episodes=episodes, navmesh=navmesh, seed=seed,
                      title=f"{scene.name}: {len(episodes)} episodes (seed {seed})")
     return summary

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
 from wanderland_nav.scene import load_scene, make_demo_scene
-from wanderland_nav.scene.loader import SCENE_MARKERS, is_scene_folder
+from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
 from wanderland_nav.scene_preparation import prepare_scene
 
 log = logging.getLogger(__name__)
@@ -25,7 +25,7 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
         make_demo_scene(path, seed=scene.seed, preset=preset)
         log.info("demo scene (%s) ready at %s (%.1fs)", preset, path, time.perf_counter() - t)
     elif not is_scene_folder(path):
-        raise FileNotFoundError(f"scene.path={path}: not a scene folder (none of {', '.join(SCENE_MARKERS)})")
+        raise FileNotFoundError(f"scene.path={path}: not a scene folder ({SCENE_LAYOUTS})")
     return path
 
 

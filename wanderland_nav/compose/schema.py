@@ -228,6 +228,17 @@ class FitRunConfig:
 
 
 @dataclass
+class ExportUsdConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    out: Optional[str] = None
+    gaussians: bool = True
+    max_gaussians: Optional[int] = None
+    cameras: bool = True
+    episodes: bool = True
+
+
+@dataclass
 class ReconEvalConfig:
     pred: Optional[str] = None
     gt: Optional[str] = None
@@ -249,7 +260,8 @@ class ReconEvalConfig:
 
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
-           "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig}
+           "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig,
+           "export_usd": ExportUsdConfig}
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):

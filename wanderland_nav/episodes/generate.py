@@ -152,7 +152,7 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     rng = np.random.default_rng(seed)
     R_ns = np.asarray(scene.nav_from_scene, dtype=np.float64)  # [3, 3]
     up = scene.up_axis
-    sampler = EndpointSampler(navmesh, scene.camera_centers(), R_ns, settings.sampler)
+    sampler = EndpointSampler(navmesh, scene.capture_positions(), R_ns, settings.sampler)
     pairs = sampler.sample(num_episodes, rng, progress=progress)
     E = len(pairs.starts)
     dec = settings.decimals

@@ -7,6 +7,7 @@ env keeps goal images and observations consistent. Cameras are batched through `
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Sequence
 
@@ -15,6 +16,8 @@ import torch
 
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.geometry import agent_camera_poses, frustum_mask, invert_rigid, pinhole_intrinsics
+
+log = logging.getLogger(__name__)
 
 
 def goal_camera_poses(goals_nav: np.ndarray, yaws_nav: np.ndarray, nav_from_scene: np.ndarray, *,
@@ -30,8 +33,9 @@ def goal_camera_poses(goals_nav: np.ndarray, yaws_nav: np.ndarray, nav_from_scen
 def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np.ndarray,
                        nav_from_scene: np.ndarray, out_paths: Sequence[Path], *, height: float,
                        width: int = 320, image_height: int = 240, hfov_deg: float = 90.0, pitch: float = 0.0,
-                       batch: int = 8, device: str = "cpu") -> list[Path]:
-    """Render one PNG per goal into `out_paths` (atomic writes); returns the paths.
+                       batch: int = 8, device: str = "cpu") -> list[Path | None]:
+    """Render one PNG per goal into `out_paths` (atomic writes); returns the paths (all None, with a
+    warning, when the scene has no Gaussians: `gaussians_path=None`).
 
     goals_nav `[N, 3]` feet positions (nav frame), yaws_nav `[N]` headings (rad). The Gaussians are
     loaded once and rendered `batch` cameras at a time (memory grows with C * H * W).
@@ -42,6 +46,9 @@ def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np
 
     if len(out_paths) != len(goals_nav):
         raise ValueError(f"render_goal_images: {len(goals_nav)} goals but {len(out_paths)} output paths")
+    if gaussians_path is None:  # a LiDAR-only scene: episodes are still valid, they just carry no goal view
+        log.warning("no 3dgs.ply in the scene: %d goal image(s) skipped (episodes get no goal_image)", len(out_paths))
+        return [None] * len(out_paths)
     if not Path(gaussians_path).is_file():
         raise FileNotFoundError(f"{gaussians_path}: Gaussian splats (3dgs.ply) not found; needed for goal images "
                                 "(set goal_images=false to skip them)")

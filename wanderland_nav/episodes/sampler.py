@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from wanderland_nav.geometry import nav_from_scene_rotation
+
 #: every reason a candidate pair can be thrown away, in the order the filters run
 REJECTION_REASONS = (
     "off_mesh",          # the drawn ground point was not over the navmesh (snapping would put it on an edge)
@@ -93,9 +95,14 @@ class EndpointSampler:
         self.navmesh = navmesh
         self.s = settings
         self.R_ns = np.asarray(nav_from_scene, dtype=np.float64)  # [3, 3]
+        nm_up = getattr(getattr(navmesh, "settings", None), "up_axis", None)
+        if nm_up is not None and not np.allclose(nav_from_scene_rotation(nm_up), self.R_ns):
+            raise ValueError(f"EndpointSampler: the navmesh was baked with up axis {nm_up} but the scene's frame "
+                             "differs (nav_from_scene); re-run prepare for this scene's up axis")
         cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3)  # [M, 3] scene frame
         if len(cams) == 0:
-            raise ValueError("EndpointSampler: the scene has no capture cameras to sample around")
+            raise ValueError("EndpointSampler: the scene has no capture positions to sample around (no cameras, "
+                             "no lidar/poses.txt): episodes start near the capture trajectory")
         self.cams_nav = cams @ self.R_ns.T  # [M, 3] nav frame
         # ground height under every camera: the navmesh point closest to the camera centre. Cameras
         # whose nearest ground is not below them within camera_max_drop (e.g. above a hole) are unusable.

@@ -1,6 +1,6 @@
 """Collision mesh from a metric point cloud: the Wanderland paper's recipe.
 
-crop to the capture corridor -> voxel occupancy -> marching cubes -> drop small components.
+crop to the capture corridor -> voxel occupancy -> ground infill -> marching cubes -> drop small components.
 
 Why each step:
 * **crop** — LiDAR sees far beyond where an agent can go (building facades 80 m away, sky returns,
@@ -10,6 +10,9 @@ Why each step:
 * **voxel occupancy** — turns an unstructured, noisy cloud into a watertight-able field; voxels
   with fewer than `min_points_per_voxel` hits are noise; an optional morphological closing
   (`close_iterations`) bridges the gaps between LiDAR rings.
+* **ground infill** (`scene.ground`) — a LiDAR sees no ground under itself and a sparse one sees the
+  road only as rings; ground columns bounded by observed ground on all sides are filled from a height
+  field fitted between the ground returns, never across an observed obstacle (`ground_fill`).
 * **marching cubes** (scikit-image) on the occupancy at level 0.5 ("ascent": outward winding, positive
   volume): each occupied layer becomes a
   thin closed slab whose faces sit half a voxel from the scanned surface, normals pointing out.
@@ -44,6 +47,7 @@ from skimage.measure import marching_cubes
 
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
+from wanderland_nav.scene.ground import fill_ground
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +67,17 @@ class CollisionSettings:
     drop_tops_above_capture: float | None = 0.5
     min_points_per_voxel: int = 1
     close_iterations: int = 1  # binary closing (6-connected) to bridge scan-line gaps; 0 = off
+    # Ground infill (`scene.ground.fill_ground`): fill ground columns LiDAR missed (the blind spot under
+    # the sensor, the gaps between sparse rings) where observed ground bounds them on all sides.
+    ground_fill: bool = True
+    ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
+    ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
+    ground_max_rise: float = 0.3  # a column is ground within this of that lowest voxel (m)
+    ground_clearance: float = 2.0  # returns up to this high above ground make a column an obstacle (m)
+    ground_bridge: float = 6.0  # fills may span connected obstacles up to this long (a parked car), not walls
+    # v2 scenes ship `scene.ply` (a TSDF mesh): use it as the collision mesh (cropped like the points)
+    # instead of re-extracting one from the LiDAR. False: always extract from the points.
+    use_scene_mesh: bool = False
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
     chunk_points: int = 1_000_000  # points processed per batch (memory bound)
 
@@ -269,6 +284,15 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     grid = np.zeros(tuple(dims), dtype=bool)
     loc = ijk - imin + pad
     grid[loc[:, 0], loc[:, 1], loc[:, 2]] = True
+    if cfg.ground_fill:
+        fill = fill_ground(loc, dims, vox, max_gap=cfg.ground_max_gap, window=cfg.ground_window,
+                           max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance,
+                           bridge_size=cfg.ground_bridge)
+        grid[fill.voxels[:, 0], fill.voxels[:, 1], fill.voxels[:, 2]] = True
+        meta["ground_fill"] = {"filled_area_m2": fill.filled_area_m2, "ground_columns": fill.ground_columns,
+                               "obstacle_columns": fill.obstacle_columns}
+        log.info("ground infill: %.1f m2 added between %d ground columns (%d obstacle columns)",
+                 fill.filled_area_m2, fill.ground_columns, fill.obstacle_columns)
     if cfg.close_iterations > 0:
         grid = ndi.binary_closing(grid, iterations=cfg.close_iterations)
     timings["grid_s"] = time.perf_counter() - t2
@@ -302,3 +326,25 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     log.info("collision mesh: %d/%d points kept, grid %s, %d faces (%d before filtering), %.2fs",
              meta["points_kept"], meta["points_in"], meta["grid_shape"], faces.shape[0], n_before, timings["total_s"])
     return mesh
+
+
+def crop_mesh_to_trajectory(mesh: trimesh.Trimesh, camera_centers, up_axis: str,
+                            settings: CollisionSettings) -> trimesh.Trimesh:
+    """A ready mesh (v2 `scene.ply`, scene frame) cropped like the points: faces whose centre lies within
+    `crop_radius` and `height_band` of the capture positions, then small components dropped."""
+    Rn = nav_from_scene_rotation(parse_up_axis(up_axis))
+    t0 = time.perf_counter()
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3)
+    keep = crop_to_trajectory((v[f].mean(1) @ Rn.T).astype(np.float32), cams @ Rn.T, settings.crop_radius,
+                              settings.height_band, settings.chunk_points)
+    v2, f2 = drop_small_components(v, f[keep], settings.min_component_faces)
+    out = trimesh.Trimesh(vertices=v2, faces=f2, process=False)
+    out.metadata["collision"] = {"settings": settings.as_dict(), "up_axis": up_axis, "source": "scene.ply",
+                                 "points_in": int(len(f)), "points_kept": int(keep.sum()), "grid_shape": [],
+                                 "timings": {"total_s": time.perf_counter() - t0}}
+    if len(f2) == 0:
+        raise ValueError(f"scene.ply: no faces left after cropping {len(f)} faces to radius {settings.crop_radius} m "
+                         f"around {len(cams)} capture positions (wrong up axis '{up_axis}'?)")
+    return out

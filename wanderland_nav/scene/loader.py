@@ -25,7 +25,8 @@ import numpy as np
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
 from wanderland_nav.scene import colmap as C
 from wanderland_nav.scene.types import Camera, Scene, SceneFormatError
-from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_ply_points, read_points_any
+from wanderland_nav.scene.pointcloud import (LIDAR_SUFFIXES, PointCloudFormatError, read_ply_points,
+                                             read_points_any)
 from wanderland_nav.scene.transforms import (TransformsJson, _norm_name, read_scene_meta,
                                              read_transforms_json)
 
@@ -38,15 +39,6 @@ _QUAT_NORM_TOL = 1e-2
 
 
 #: files whose presence marks a folder as a scene folder (any one of them); extend here for new layouts
-SCENE_MARKERS = ("scene_meta.json", "navmesh.npz", "sparse", "transforms.json", "raw_pcd.ply", "3dgs.ply")
-
-
-def is_scene_folder(path) -> bool:
-    """Whether `path` is a scene folder (the one test every entry point uses, via `compose`)."""
-    p = Path(path)
-    return p.is_dir() and any((p / m).exists() for m in SCENE_MARKERS)
-
-
 def load_scene(path, up_axis: str | None = None) -> Scene:
     """Load the scene folder at `path` (v1 or v2 layout, detected from its files)."""
     root = Path(path)
@@ -61,10 +53,11 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
 
     tj = read_transforms_json(root / "transforms.json") if (root / "transforms.json").is_file() else None
     cameras = _load_cameras(root, tj)
+    lidar_poses = None
     if version == "v1":
         points, colors = _load_v1_points(root)
     else:
-        points, colors = _load_v2_points(root)
+        points, colors, lidar_poses = _load_v2_points(root, meta)
 
     def opt(name: str) -> Path | None:
         p = root / name
@@ -77,7 +70,7 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
         episodes_path=opt("episodes.json"), gt_mesh_path=opt("gt_mesh.ply"),
         environment=meta.environment if meta else None, indoor_regions=meta.indoor_regions if meta else [],
         up_axis_source=source, mesh_path=opt("scene.ply") if version == "v2" else None,
-        meta=meta.raw if meta else {},
+        meta=meta.raw if meta else {}, lidar_poses=lidar_poses,
     )
 
 
@@ -94,21 +87,49 @@ def _sparse_dir(root: Path) -> Path | None:
     return None
 
 
+def _lidar_files(root: Path) -> list[Path]:
+    """Point-cloud files in `lidar/` (sorted by name: the order `lidar/poses.txt` lines follow)."""
+    ldir = root / "lidar"
+    return sorted(p for p in ldir.iterdir() if p.is_file() and p.suffix.lower() in LIDAR_SUFFIXES) \
+        if ldir.is_dir() else []
+
+
+SCENE_LAYOUTS = ("a scene folder holds sparse/0 (COLMAP) or raw_pcd.ply (v1), or scene.ply or point clouds "
+                 "in lidar/ (v2)")
+
+
+def scene_layout(path) -> str | None:
+    """"v1", "v2" or None (not a scene folder), from the files present. The one definition every entry
+    point uses to decide whether a folder is a scene: v1 has `sparse/0` (COLMAP) or `raw_pcd.ply`; v2 has
+    `scene.ply` or point clouds in `lidar/` (`.ply`, KITTI `.bin`, `.las`; a LiDAR-only folder counts)."""
+    root = Path(path)
+    if not root.is_dir():
+        return None
+    has_v2 = (root / "scene.ply").is_file() or bool(_lidar_files(root))
+    if has_v2 and not (root / "raw_pcd.ply").is_file():
+        return "v2"
+    if (root / "raw_pcd.ply").is_file() or _sparse_dir(root) is not None:
+        return "v1"
+    return None
+
+
+def is_scene_folder(path) -> bool:
+    """Whether `load_scene(path)` finds a scene layout there (see `scene_layout`)."""
+    return scene_layout(path) is not None
+
+
 def _detect_version(root: Path, meta) -> str:
     declared = meta.raw.get("version") if meta else None
     if declared is not None:
         if declared not in ("v1", "v2"):
             raise SceneFormatError(f"{meta.path}: field version must be 'v1' or 'v2', got {declared!r}")
         return declared
-    has_v2 = (root / "scene.ply").is_file() or (root / "lidar").is_dir()
-    has_v1 = (root / "raw_pcd.ply").is_file() or _sparse_dir(root) is not None
-    if has_v2 and not (root / "raw_pcd.ply").is_file():
-        return "v2"
-    if has_v1:
-        return "v1"
-    raise SceneFormatError(
-        f"{root}: not a Wanderland scene folder: expected sparse/0/{{cameras,images}}.{{bin,txt}} or raw_pcd.ply "
-        "(v1), or scene.ply / lidar/ (v2)")
+    version = scene_layout(root)
+    if version is None:
+        raise SceneFormatError(
+            f"{root}: not a Wanderland scene folder: expected sparse/0/{{cameras,images}}.{{bin,txt}} or "
+            f"raw_pcd.ply (v1), or scene.ply / lidar/*{{{','.join(LIDAR_SUFFIXES)}}} (v2)")
+    return version
 
 
 def _resolve_up_axis(root: Path, version: str, meta, up_axis: str | None) -> tuple[str, str]:
@@ -258,8 +279,10 @@ def _cameras_from_colmap(root: Path, sdir: Path, tj: TransformsJson | None) -> l
 
 
 def _cameras_from_transforms(root: Path, tj: TransformsJson) -> list[Camera]:
-    """No COLMAP model: poses and intrinsics from transforms.json frames (converted to OpenCV axes)."""
-    images_dir = root / "images"
+    """No COLMAP model: poses and intrinsics from transforms.json frames (converted to OpenCV axes).
+    Images live in `images/` (v1) or `fisheye/` (v2 as released); frame paths may carry either prefix."""
+    images_dir = next((root / d for d in ("images", "fisheye", "images_fisheye") if (root / d).is_dir()),
+                      root / "images")
     mask_idx, depth_idx = _file_index(root / "images_mask", _MASK_EXTS), _file_index(root / "depth", _DEPTH_EXTS)
     cams = []
     frames = sorted({id(fr): fr for fr in tj.frames.values() if "transform_matrix" in fr}.values(),
@@ -359,43 +382,91 @@ def _load_v1_points(root: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _read_kitti_poses(path: Path, n: int) -> np.ndarray:
-    """KITTI poses file: one row-major 3x4 world_from_lidar per line -> `[n,4,4]`."""
-    try:
-        rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except ValueError as e:
-        raise SceneFormatError(f"{path}: cannot parse poses ({e})") from None
-    if rows.shape[1] != 12:
-        raise SceneFormatError(f"{path}: each line needs 12 numbers (3x4 pose), got {rows.shape[1]}")
-    if rows.shape[0] < n:
-        raise SceneFormatError(f"{path}: {rows.shape[0]} poses for {n} lidar frames")
+    """KITTI poses file: one row-major 3x4 world_from_lidar per line (`#` comments and blank lines
+    skipped) -> `[n,4,4]`. Errors quote the file's 1-based line number."""
+    rows, lines = [], []
+    for ln, text in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        t = text.split("#", 1)[0].split()
+        if not t:
+            continue
+        try:
+            vals = [float(x) for x in t]
+        except ValueError:
+            raise SceneFormatError(f"{path}:{ln}: pose line is not 12 numbers: {text.strip()[:80]!r}") from None
+        if len(vals) != 12:
+            raise SceneFormatError(f"{path}:{ln}: a pose line needs 12 numbers (row-major 3x4), got {len(vals)}")
+        rows.append(vals)
+        lines.append(ln)
+    if len(rows) < n:
+        raise SceneFormatError(f"{path}: {len(rows)} poses for {n} lidar frames (one line per frame, in name order)")
     T = np.tile(np.eye(4), (n, 1, 1))
-    T[:, :3, :] = rows[:n].reshape(n, 3, 4)
-    try:
-        validate_rigid(T, what=f"{path}: pose")
-    except ValueError as e:
-        raise SceneFormatError(str(e)) from None
+    T[:, :3, :] = np.asarray(rows[:n]).reshape(n, 3, 4)
+    for i in range(n):  # tens of frames: per-pose checks so the message names the line
+        try:
+            validate_rigid(T[i], what=f"{path}:{lines[i]}: pose")
+        except ValueError as e:
+            raise SceneFormatError(str(e).replace(" at index [0]", "")) from None
     return T
 
 
-def _load_v2_points(root: Path) -> tuple[np.ndarray, np.ndarray]:
-    """`lidar/` frames (sorted by name), moved by `lidar/poses.txt` when present; else the mesh vertices."""
+def _scan_poses(root: Path, files: list[Path], meta) -> np.ndarray | None:
+    """world_from_sensor `[K,4,4]` for the `lidar/` files: `poses.txt`; identity for one KITTI `.bin` scan
+    (its points are in the sensor frame); None for a registered cloud. Several files without poses are
+    an error unless `scene_meta.json` says `"lidar_registered": true`: stacking unmoved scans is wrong."""
     ldir = root / "lidar"
-    files = sorted(p for p in ldir.glob("*") if p.suffix.lower() in (".ply", ".bin")) if ldir.is_dir() else []
+    if (ldir / "poses.txt").is_file():
+        return _read_kitti_poses(ldir / "poses.txt", len(files))
+    registered = bool(meta.raw.get("lidar_registered", False)) if meta else False
+    if len(files) > 1 and not registered:
+        raise SceneFormatError(
+            f"{ldir}: {len(files)} scans but no poses.txt: scans in their sensor frames would be stacked "
+            "unmoved. Add lidar/poses.txt (one KITTI 3x4 world_from_lidar per scan, in name order) or, if "
+            "the files are already in one world frame, set \"lidar_registered\": true in scene_meta.json")
+    if len(files) == 1 and files[0].suffix.lower() == ".bin" and not registered:
+        return np.eye(4)[None]
+    return None
+
+
+def _lidar_min_range(meta, poses) -> float:
+    """`scene_meta.json` `lidar_min_range` (m, default 0): returns closer than this to the sensor (horizontal,
+    in each scan's own frame) are the capture platform (a car's roof, hood and mirrors seen by its roof
+    LiDAR: KITTI ~2.6 m) and are dropped; they would be obstacles inside the blind spot under the path."""
+    if meta is None or "lidar_min_range" not in meta.raw:
+        return 0.0
+    r = meta.raw["lidar_min_range"]
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not np.isfinite(r) or r < 0:
+        raise SceneFormatError(f"{meta.path}: field lidar_min_range must be a number >= 0 (metres), got {r!r}")
+    if r > 0 and poses is None:
+        raise SceneFormatError(f"{meta.path}: field lidar_min_range needs scans in their sensor frames "
+                               "(lidar/poses.txt or one .bin scan); these files are a registered cloud")
+    return float(r)
+
+
+def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """`lidar/` frames (sorted by name), moved by `lidar/poses.txt` when present; else the mesh vertices.
+    Returns (points, colours, world_from_sensor poses or None)."""
+    files = _lidar_files(root)
     if files:
-        poses = _read_kitti_poses(ldir / "poses.txt", len(files)) if (ldir / "poses.txt").is_file() else None
+        poses = _scan_poses(root, files, meta)
+        min_range = _lidar_min_range(meta, poses)
         xyzs, rgbs = [], []
         for i, f in enumerate(files):  # one iteration per LiDAR frame (tens), points are batched
             try:
                 pc = read_points_any(f)
             except PointCloudFormatError as e:
                 raise SceneFormatError(str(e)) from None
+            if len(pc) == 0:
+                raise SceneFormatError(f"{f}: empty scan (0 points)")
             _check_finite(f, pc.xyz)
-            xyz = pc.xyz.astype(np.float64)
-            if poses is not None:
-                xyz = xyz @ poses[i, :3, :3].T + poses[i, :3, 3]
-            xyzs.append(xyz.astype(np.float32))
-            rgbs.append(pc.rgb if pc.rgb is not None else np.full((len(pc), 3), 128, np.uint8))
-        return np.concatenate(xyzs), np.concatenate(rgbs)
+            xyz, rgb = pc.xyz, pc.rgb
+            if min_range > 0:  # sensor frame: returns from the capture platform itself
+                far = np.linalg.norm(xyz[:, :2], axis=1) >= min_range
+                xyz, rgb = xyz[far], rgb[far] if rgb is not None else None
+            if poses is not None and not np.array_equal(poses[i], np.eye(4)):
+                xyz = (xyz.astype(np.float64) @ poses[i, :3, :3].T + poses[i, :3, 3]).astype(np.float32)
+            xyzs.append(xyz)
+            rgbs.append(rgb if rgb is not None else np.full((len(xyz), 3), 128, np.uint8))
+        return np.concatenate(xyzs), np.concatenate(rgbs), poses
     mesh = root / "scene.ply"
     if mesh.is_file():
         log.warning("%s: no lidar/ frames: using scene.ply vertices as the point cloud", root)
@@ -404,5 +475,5 @@ def _load_v2_points(root: Path) -> tuple[np.ndarray, np.ndarray]:
         except PointCloudFormatError as e:
             raise SceneFormatError(str(e)) from None
         _check_finite(mesh, pc.xyz)
-        return pc.xyz, pc.rgb if pc.rgb is not None else np.full((len(pc), 3), 128, np.uint8)
-    raise SceneFormatError(f"{root}: v2 scene has neither lidar/*.ply|*.bin nor scene.ply")
+        return pc.xyz, pc.rgb if pc.rgb is not None else np.full((len(pc), 3), 128, np.uint8), None
+    raise SceneFormatError(f"{root}: v2 scene has neither lidar/*{{{','.join(LIDAR_SUFFIXES)}}} nor scene.ply")

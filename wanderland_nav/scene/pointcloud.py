@@ -129,29 +129,86 @@ def write_ply_element(path, element: str, cols: list[tuple[str, np.ndarray]], *,
 # --------------------------------------------------------------------------- KITTI
 
 
+#: point-cloud files a v2 `lidar/` folder may hold
+LIDAR_SUFFIXES = (".ply", ".bin", ".las", ".laz")
+#: `.bin` record layouts seen in the wild: name -> (numpy dtype, values per record). Only KITTI's is read;
+#: the others are recognised so that the error names the format instead of returning garbage points.
+BIN_RECORD_FORMATS = {
+    "KITTI float32 x y z intensity": ("<f4", 4),
+    "nuScenes float32 x y z intensity ring": ("<f4", 5),
+    "float64 x y z intensity": ("<f8", 4),
+    "float64 x y z": ("<f8", 3),
+}
+_KITTI = "KITTI float32 x y z intensity"
+
+
+def _plausible_scan(rec: np.ndarray) -> bool:
+    """Whether `[N, C]` records look like a real scan: finite x/y/z within 10 km, not mostly denormal
+    (a float64 read as float32), and a non-negative intensity column (a shifted record puts x/y there)."""
+    with np.errstate(invalid="ignore"):  # signalling NaNs in misread bytes
+        xyz = rec[:, :3].astype(np.float64)
+    if not np.isfinite(xyz).all() or (np.abs(xyz) > 1e4).any():
+        return False
+    tiny = (np.abs(xyz) < 1e-20) & (xyz != 0)
+    if tiny.mean() > 0.01:
+        return False
+    return rec.shape[1] < 4 or bool((rec[:, 3] >= 0).all())
+
+
+def bin_formats_fitting(path) -> list[str]:
+    """Names of `BIN_RECORD_FORMATS` whose record size divides the file size and whose values look like a scan."""
+    path = Path(path)
+    size = path.stat().st_size
+    out = []
+    for name, (dt, c) in BIN_RECORD_FORMATS.items():
+        rec_bytes = np.dtype(dt).itemsize * c
+        if size and size % rec_bytes == 0:
+            rec = np.fromfile(path, dtype=dt).reshape(-1, c)
+            if _plausible_scan(rec):
+                out.append(name)
+    return out
+
+
 def read_kitti_bin(path) -> np.ndarray:
-    """KITTI Velodyne scan: float32 `x y z intensity` records -> `[N,4]` float32 (sensor frame, z up)."""
+    """KITTI Velodyne scan: float32 `x y z intensity` records -> `[N,4]` float32 (sensor frame, z up).
+
+    The file size must be a whole number of 16-byte records and the values must look like a scan;
+    otherwise the error names the byte count and any other known record format that fits."""
     path = Path(path)
     if not path.is_file():
         raise PointCloudFormatError(f"{path}: file not found")
-    raw = np.fromfile(path, dtype="<f4")
-    if raw.size % 4:
+    size = path.stat().st_size
+    if size == 0:
+        raise PointCloudFormatError(f"{path}: empty scan (0 bytes, no points)")
+    if size % 16 == 0:
+        pts = np.fromfile(path, dtype="<f4").reshape(-1, 4)
+        if _plausible_scan(pts):
+            return pts
+    fits = bin_formats_fitting(path)
+    hint = (f"; it looks like {' or '.join(repr(f) for f in fits)} records: convert it to KITTI float32 "
+            "x y z intensity") if fits else ""
+    if size % 16:
+        n, rest = divmod(size, 16)
         names = ("x", "y", "z", "intensity")
-        raise PointCloudFormatError(f"{path}: truncated KITTI scan: {raw.size * 4} bytes is not a multiple of 16 "
-                                    f"(last record stops before property '{names[raw.size % 4]}')")
-    pts = raw.reshape(-1, 4)
-    if not np.isfinite(pts[:, :3]).all():
-        raise PointCloudFormatError(f"{path}: non-finite x/y/z in {int((~np.isfinite(pts[:, :3])).any(-1).sum())} points")
-    return pts
+        raise PointCloudFormatError(
+            f"{path}: {size} bytes is not a whole number of 16-byte KITTI records (float32 x y z intensity): "
+            f"{n} records + {rest} bytes, the last record stops in property '{names[rest // 4]}'{hint}")
+    raise PointCloudFormatError(
+        f"{path}: {size} bytes read as KITTI float32 x y z intensity records give implausible points "
+        f"(non-finite or beyond 10 km, denormal, or negative intensity){hint}")
 
 
 def read_points_any(path) -> PointCloud:
-    """A LiDAR frame from `.ply` or KITTI-style `.bin` (what v2 `lidar/` folders contain)."""
+    """A LiDAR frame from `.ply`, KITTI-style `.bin` or `.las`/`.laz` (what v2 `lidar/` folders contain)."""
     path = Path(path)
     suf = path.suffix.lower()
     if suf == ".ply":
         return read_ply_points(path)
+    if suf in LIDAR_SUFFIXES[2:]:
+        from wanderland_nav.scene.las import read_las_points  # laspy is an optional dependency
+
+        return read_las_points(path)
     if suf == ".bin":
         p = read_kitti_bin(path)
         return PointCloud(np.ascontiguousarray(p[:, :3]), None, {"intensity": p[:, 3].copy()})
-    raise PointCloudFormatError(f"{path}: unsupported point-cloud format '{suf}' (expected .ply or .bin)")
+    raise PointCloudFormatError(f"{path}: unsupported point-cloud format '{suf}' (expected one of {LIDAR_SUFFIXES})")

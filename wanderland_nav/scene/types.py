@@ -77,6 +77,9 @@ class Scene:
     # beyond the contract: provenance and optional v2 data
     up_axis_source: str = "unspecified"
     mesh_path: Path | None = None  # v2 `scene.ply` reconstructed mesh
+    # v2 LiDAR: world_from_sensor `[K,4,4]` of each `lidar/` scan (scene frame); None when unknown
+    # (one registered cloud such as `colorized.las`, or scans declared registered without poses)
+    lidar_poses: np.ndarray | None = None
     meta: dict = field(default_factory=dict)  # scene_meta.json content (generator info etc.)
 
     def __post_init__(self) -> None:
@@ -98,6 +101,15 @@ class Scene:
         if not cams:
             return np.zeros((0, 3))
         return np.stack([c.world_from_cam[:3, 3] for c in cams]).astype(np.float64)
+
+    def capture_positions(self) -> np.ndarray:
+        """Scene-frame positions `[M,3]` of the capture trajectory: camera centres, else the LiDAR
+        sensor positions (v2 `lidar/poses.txt`, or the origin of a single unposed scan), else `[0,3]`."""
+        if self.cameras:
+            return self.camera_centers()
+        if self.lidar_poses is not None:
+            return np.asarray(self.lidar_poses, dtype=np.float64)[:, :3, 3]
+        return np.zeros((0, 3))
 
     def world_from_cams(self, split: str | None = None) -> np.ndarray:
         """All poses stacked `[M,4,4]` float64 (scene frame, OpenCV camera axes)."""

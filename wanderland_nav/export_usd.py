@@ -1,0 +1,41 @@
+"""`python -m wanderland_nav.export_usd [scene=demo | scene=<folder>] [out=scene.usdz]`: a prepared scene as USD.
+
+Thin Hydra entry point: compose prepares the scene (conf/navigation/), then
+`wanderland_nav.usd.export_scene_usd` writes the stage (needs `usd-core`: `pip install 'wanderland_nav[usd]'`).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import hydra
+from hydra.utils import to_absolute_path
+from omegaconf import DictConfig
+
+from wanderland_nav.compose import prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose.schema import ExportUsdConfig
+
+
+def run(cfg: DictConfig) -> dict:
+    """Everything `main` does (tests call it with a composed config). Returns the export summary."""
+    from wanderland_nav.usd import UsdExportSettings, export_scene_usd
+
+    c: ExportUsdConfig = typed_config(cfg, ExportUsdConfig)
+    scene = prepared_scene(c.scene, c.navigation)
+    out = Path(to_absolute_path(c.out)) if c.out else scene.root / "scene.usda"
+    settings = UsdExportSettings(gaussians=c.gaussians, max_gaussians=c.max_gaussians, cameras=c.cameras,
+                                 episodes=c.episodes)
+    summary = export_scene_usd(scene, out, settings)
+    print(f"wrote {out}: " + ", ".join(f"{k} {v}" for k, v in summary.items() if k != "out"), flush=True)
+    return summary
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="export_usd")
+def main(cfg: DictConfig) -> None:
+    run(cfg)
+
+
+if __name__ == "__main__":
+    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    main()
