@@ -60,16 +60,27 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
     Tile coverage is gsplat's: [floor((x - r)/ts), ceil((x + r)/ts)) clamped to the grid.
     """
     C, N = depths.shape
-    dev = depths.device
-    num_tiles = C * tile_height * tile_width
     with torch.no_grad():
         vis = ((radii > 0).all(-1)).reshape(-1).nonzero().squeeze(1)  # [V]
-        V = vis.numel()
+        ent, counts = isect_packed(torch.div(vis, N, rounding_mode="floor"), means2d.reshape(-1, 2).index_select(0, vis),
+                                   radii.reshape(-1, 2).index_select(0, vis), depths.reshape(-1).index_select(0, vis),
+                                   C, tile_size, tile_width, tile_height)
+    return vis, ent, counts
+
+
+def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, C: int,
+                 tile_size: int, tile_width: int, tile_height: int):
+    """Tile lists of V visible (camera, Gaussian) pairs: cam [V] camera ids, means2d [V,2], radii [V,2] > 0,
+    depths [V]. Returns ent [M] (indices into the V pairs, grouped by tile id c*TH*TW + ty*TW + tx,
+    depth-ascending within a tile) and counts [C*TH*TW] (int64)."""
+    dev = depths.device
+    num_tiles = C * tile_height * tile_width
+    V = depths.numel()
+    with torch.no_grad():
         if V == 0:
-            empty = torch.zeros(0, dtype=torch.long, device=dev)
-            return vis, empty, torch.zeros(num_tiles, dtype=torch.long, device=dev)
-        m = means2d.detach().reshape(-1, 2).index_select(0, vis)
-        r = radii.reshape(-1, 2).index_select(0, vis).to(m.dtype)
+            return torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(num_tiles, dtype=torch.long, device=dev)
+        m = means2d.detach()
+        r = radii.to(m.dtype)
         x0 = torch.floor((m[:, 0] - r[:, 0]) / tile_size).clamp_(0, tile_width).long()
         x1 = torch.ceil((m[:, 0] + r[:, 0]) / tile_size).clamp_(0, tile_width).long()
         y0 = torch.floor((m[:, 1] - r[:, 1]) / tile_size).clamp_(0, tile_height).long()
@@ -79,10 +90,9 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
         # Visit Gaussians in depth order (exact: integer radix sort of the float bits, stable on ties),
         # expand each into its covered tiles, then a *stable* sort by tile id (a small integer key)
         # keeps depth order inside every tile. Two cheap radix sorts instead of one on wide keys.
-        order = torch.sort(_sortable_int(depths.detach().reshape(-1).index_select(0, vis)), stable=True).indices
+        order = torch.sort(_sortable_int(depths.detach()), stable=True).indices
         cnt_o = cnt.index_select(0, order)
-        cam = torch.div(vis, N, rounding_mode="floor")
-        first_tile = ((cam * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
+        first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
         wx_o = wx.index_select(0, order)
         M = int(cnt_o.sum())
         src = torch.repeat_interleave(torch.arange(V, device=dev), cnt_o, output_size=M)  # [M] depth-order slot
@@ -93,7 +103,7 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
         tile, perm = torch.sort(tile, stable=True)
         ent = order.index_select(0, src.index_select(0, perm))
         counts = torch.bincount(tile, minlength=num_tiles)
-    return vis, ent, counts
+    return ent, counts
 
 
 # --------------------------------------------------------------------------------------------
@@ -425,14 +435,42 @@ def rasterize_to_pixels(
     schedule: "compact" (drop finished tiles, CPU default), "masked" (fixed chunks, no host syncs in
     the loop, GPU default) or "auto". Both give the same image; "masked" is testable on CPU.
     """
-    if schedule not in ("auto", "compact", "masked"):
-        raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
-    compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     C, N, D = colors.shape
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     vis, ent, counts = isect_tiles(means2d, radii, depths, tile_size, TW, TH)
-    dtype = means2d.dtype
     sel = lambda t, k: t.reshape(C * N, k).index_select(0, vis)  # noqa: E731  visible rows (autograd-tracked)
-    acc = _RasterizeFn.apply(sel(means2d, 2), sel(conics, 3), sel(opacities, 1)[:, 0], sel(colors.to(dtype), D),
-                             ent, counts, C, height, width, tile_size, chunk_elems, compact)
+    return _composite(sel(means2d, 2), sel(conics, 3), sel(opacities, 1)[:, 0], sel(colors.to(means2d.dtype), D),
+                      ent, counts, C, width, height, tile_size, chunk_elems, schedule)
+
+
+def rasterize_packed(
+    camera_ids: torch.Tensor,  # [M] in 0..C-1
+    means2d: torch.Tensor,  # [M, 2]
+    conics: torch.Tensor,  # [M, 3]
+    colors: torch.Tensor,  # [M, D]
+    opacities: torch.Tensor,  # [M]
+    radii: torch.Tensor,  # [M, 2] int, all > 0
+    depths: torch.Tensor,  # [M] (sort key only)
+    C: int,
+    width: int,
+    height: int,
+    *,
+    tile_size: int = 16,
+    chunk_elems: int = DEFAULT_CHUNK_ELEMS,
+    schedule: str = "auto",
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair)."""
+    TW, TH = -(-width // tile_size), -(-height // tile_size)
+    ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH)
+    return _composite(means2d, conics, opacities, colors.to(means2d.dtype), ent, counts, C, width, height,
+                      tile_size, chunk_elems, schedule)
+
+
+def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule):
+    if schedule not in ("auto", "compact", "masked"):
+        raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
+    compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
+    D = colors.shape[-1]
+    acc = _RasterizeFn.apply(means2d, conics, opacities, colors, ent, counts, C, height, width, tile_size,
+                             chunk_elems, compact)
     return acc[..., :D], acc[..., D:]
