@@ -64,6 +64,7 @@ def rasterization(
     *,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
+    compiled: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Render N Gaussians into C cameras with gsplat 1.5 semantics (see `rasterize.py`).
 
@@ -77,8 +78,10 @@ def rasterization(
     pure performance knob here too (results do not depend on it); None picks 4 on CPU, where small
     tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
-    lens distortion coefficients) raise instead of being silently ignored.
+    lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
+    packed path's hot stages through torch.compile (`compiled.py`; eager fallback with one warning).
     """
+    _check(packed or not compiled, "compiled=True is a variant of the packed fast path; pass packed=True")
     _check(render_mode in RENDER_MODES, f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     _check(rasterize_mode in RASTERIZE_MODES, f"rasterize_mode must be one of {RASTERIZE_MODES}, got {rasterize_mode!r}")
     _check(camera_model in CAMERA_MODELS, f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
@@ -128,7 +131,7 @@ def rasterization(
                 chunk_elems=chunk_elems, schedule=schedule)
     args = tuple(map(flat, (means, covars, opacities, colors, viewmats, Ks, backgrounds)))
     if packed:
-        colors_out, alphas, meta = _rasterize_packed(*args, per_camera=per_camera, **opts)
+        colors_out, alphas, meta = _rasterize_packed(*args, per_camera=per_camera, compiled=compiled, **opts)
     else:  # the dense reference, one scene at a time (the batch dims are independent scenes)
         outs = [_rasterize_dense(*(None if x is None else x[b] for x in args), **opts) for b in range(B)]
         colors_out, alphas = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
@@ -172,13 +175,18 @@ def _meta(width, height, tile_size, n_cameras, render_mode, camera_model, raster
                 n_cameras=n_cameras, render_mode=render_mode, camera_model=camera_model, rasterize_mode=rasterize_mode)
 
 
-def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, backgrounds, *, per_camera, width, height,
+def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, backgrounds, *, per_camera, compiled, width, height,
                       near_plane, far_plane, radius_clip, eps2d, sh_degree, tile_size, render_mode, rasterize_mode,
                       camera_model, chunk_elems, schedule):
     """Fast path for B scenes x C cameras (means [B,N,3], viewmats [B,C,4,4]): packed projection of the
     shared Gaussians, colours for the visible pairs only, one binning and composite for all B*C cameras."""
     B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
-    cam, gid, proj = project_packed(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
+    project, kernel = project_packed, None
+    if compiled:
+        from .compiled import forward_chunk_compiled, project_packed_compiled
+
+        project, kernel = project_packed_compiled, forward_chunk_compiled
+    cam, gid, proj = project(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
                                     near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                                     calc_compensations=rasterize_mode == "antialiased", camera_model=camera_model)
     opac = opacities.reshape(B * N).index_select(0, gid)
@@ -194,7 +202,7 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
     render_colors, render_alphas = rasterize_packed(
         cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, B * C, width, height,
-        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule)
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, kernel=kernel)
     meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=cam % C,
                  gaussian_ids=gid % N, batch_ids=torch.div(cam, C, rounding_mode="floor"), radii=proj.radii,
                  means2d=proj.means2d, depths=proj.depths, conics=proj.conics, opacities=opac,

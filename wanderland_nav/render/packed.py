@@ -23,17 +23,19 @@ RADIUS_SIGMAS = 3.33  # the reference's largest extent (in standard deviations) 
 
 def _candidate_pairs(means, covars, opacities, viewmats, Ks, width: int, height: int, near_plane: float,
                      far_plane: float, eps2d: float, camera_model: str):
-    """(batch b, camera c, Gaussian n) index triples that may be visible, from a conservative bound.
+    """(batch b, camera c, Gaussian n) index triples that may be visible, from a conservative bound,
+    and the camera-frame centres of all pairs `[B, C, N, 3]` (differentiable).
 
     means [B,N,3], covars [B,N,3,3], opacities [B,N], viewmats [B,C,4,4], Ks [B,C,3,3]. No gradient.
     Pinhole: |J row| <= f/z * sqrt(1 + lim^2) with lim the Jacobian's clamp of x/z, and the largest
     eigenvalue of a covariance is at most its trace (times |R|^2 for non-rigid viewmats), so the reference's radius is at most
     3.33 sqrt(f^2/z^2 (1 + lim^2) tr + eps2d); +1 pixel covers its ceil. Other models: depth only.
     """
+    R, t = viewmats[..., :3, :3], viewmats[..., :3, 3]  # [B,C,3,3], [B,C,3]
+    mc_all = torch.einsum("bcij,bnj->bcni", R, means) + t[:, :, None, :]  # [B, C, N, 3] camera frame (one GEMM)
     with torch.no_grad():
-        R, t = viewmats[..., :3, :3], viewmats[..., :3, 3]  # [B,C,3,3], [B,C,3]
-        mc = torch.einsum("bcij,bnj->bcni", R, means) + t[:, :, None, :]  # [B, C, N, 3] camera frame
-        x, y, z = mc.unbind(-1)
+        R = R.detach()
+        x, y, z = mc_all.detach().unbind(-1)
         keep = (z >= near_plane) & (z <= far_plane) & (opacities >= ALPHA_THRESHOLD)[:, None, :]
         if camera_model == "pinhole":
             fx, fy = Ks[..., 0, 0, None], Ks[..., 1, 1, None]  # [B, C, 1]
@@ -48,7 +50,7 @@ def _candidate_pairs(means, covars, opacities, viewmats, Ks, width: int, height:
             u, v = fx * x * rz + cx, fy * y * rz + cy
             keep &= (u + rx > 0) & (u - rx < width) & (v + ry > 0) & (v - ry < height)
         b, c, n = keep.nonzero(as_tuple=True)
-    return b, c, n
+    return b, c, n, mc_all
 
 
 def project_packed(
@@ -73,21 +75,17 @@ def project_packed(
     in means, covars, opacities (through compensations) and viewmats.
     """
     B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
-    b, c, n = _candidate_pairs(means, covars, opacities, viewmats, Ks, width, height, near_plane, far_plane,
-                               eps2d, camera_model)
+    b, c, n, mc_all = _candidate_pairs(means, covars, opacities, viewmats, Ks, width, height, near_plane, far_plane,
+                                       eps2d, camera_model)
     cam, gid = b * C + c, b * N + n
+    mc = mc_all.reshape(-1, 3).index_select(0, cam * N + n)  # [M, 3] camera frame
     R = viewmats[..., :3, :3].reshape(B * C, 3, 3).index_select(0, cam)  # [M, 3, 3]
-    t = viewmats[..., :3, 3].reshape(B * C, 3).index_select(0, cam)
-    mp = means.reshape(B * N, 3).index_select(0, gid)
-    mc = (R * mp[:, None, :]).sum(-1) + t  # [M, 3] camera frame
     means2d, J = camera_jacobian(mc, Ks.reshape(B * C, 3, 3).index_select(0, cam), width, height, camera_model)
-    T = (J[:, :, :, None] * R[:, None, :, :]).sum(2)  # [M, 2, 3] = J W
-    S = covars.reshape(B * N, 3, 3).index_select(0, gid)
-    TS = (T[:, :, :, None] * S[:, None, :, :]).sum(2)  # [M, 2, 3] = J W Sigma
-    c00, c11 = (TS[:, 0] * T[:, 0]).sum(-1), (TS[:, 1] * T[:, 1]).sum(-1)
-    c01 = 0.5 * ((TS[:, 0] * T[:, 1]).sum(-1) + (TS[:, 1] * T[:, 0]).sum(-1))
+    T = torch.bmm(J, R)  # [M, 2, 3] = J W  (bmm: ~3x faster than broadcast-multiply-sum on CPU)
+    cov2d = torch.bmm(torch.bmm(T, covars.reshape(B * N, 3, 3).index_select(0, gid)), T.transpose(1, 2))  # [M, 2, 2]
+    c01 = 0.5 * (cov2d[:, 0, 1] + cov2d[:, 1, 0])
     op = opacities.reshape(B * N).index_select(0, gid)
-    proj = screen_space(means2d, (c00, c01, c11), mc[:, 2], op, width, height, eps2d=eps2d,
+    proj = screen_space(means2d, (cov2d[:, 0, 0], c01, cov2d[:, 1, 1]), mc[:, 2], op, width, height, eps2d=eps2d,
                         near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                         calc_compensations=calc_compensations)
     sel = (proj.radii > 0).all(-1).nonzero().squeeze(1)

@@ -151,14 +151,33 @@ def _alpha_raw(geo: "_Tiles", q: torch.Tensor) -> torch.Tensor:
     GEMM is several times slower on CPU). The clamp at -30 avoids denormals from exp (about 100x
     slower on x86); anything below log(1/255) is skipped anyway, so no result changes.
     """
+    return _alpha_from_coefs(q, geo.coords, geo.coords2, geo.uv)
+
+
+def _alpha_from_coefs(q: torch.Tensor, coords: torch.Tensor, coords2: torch.Tensor, uv: torch.Tensor):
+    """`_alpha_raw` on plain tensors (q [6,Ta,L], tile-local coords [ts], their squares, uv [ts,ts])."""
     _, Ta, L = q.shape
-    q = q.view(6, Ta * L)
-    c, c2 = geo.coords[:, None], geo.coords2[:, None]  # [ts, 1]
+    q = q.reshape(6, Ta * L)
+    c, c2 = coords[:, None], coords2[:, None]  # [ts, 1]
     X = torch.addcmul(torch.addcmul(q[5][None], c, q[3][None]), c2, q[0][None])  # [ts(u), TL]
     Y = torch.addcmul(c * q[4][None], c2, q[1][None])  # [ts(v), TL]
     s = torch.add(Y[:, None, :], X[None, :, :])  # [v, u, TL]
-    s.addcmul_(geo.uv[:, :, None], q[2][None, None, :])
-    return s.view(geo.P, Ta, L).clamp_(min=-30.0).exp_()
+    s = s.addcmul_(uv[:, :, None], q[2][None, None, :])
+    return s.view(-1, Ta, L).clamp_(min=-30.0).exp_()
+
+
+def forward_chunk(rows, center, valid, T_in, coords, coords2, uv, threshold: float, check_termination: bool):
+    """One chunk of the forward composite: (contribution [Ta, P, D+1] = sum_j w_j [c_j, 1], T_out [P, Ta]).
+
+    rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [P, Ta]. The hot stage of the renderer:
+    `compiled.py` hands exactly this function to torch.compile (there `check_termination=False`, the
+    data-dependent early-out that would break the graph; masking always gives the same result).
+    """
+    q, _, _ = _quad_coefs(rows, center, valid)
+    alpha = _alpha_from_coefs(q, coords, coords2, uv).clamp_(max=ALPHA_MAX)
+    alpha = torch.nn.functional.threshold(alpha, threshold, 0.0)
+    nT, w = _transmittance(alpha, T_in, check_termination=check_termination)
+    return torch.bmm(w.permute(1, 0, 2), rows[..., 6:]), nT[:, :, -1]
 
 
 def _transmittance(alpha: torch.Tensor, T_in: torch.Tensor, check_termination: bool):
@@ -308,7 +327,7 @@ class _RasterizeFn(torch.autograd.Function):
     """acc [C,H,W,D+1] = sum_j w_j [c_j, 1] from visible-Gaussian rows; see module docstring."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact):
+    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact, kernel):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
@@ -328,12 +347,11 @@ class _RasterizeFn(torch.autograd.Function):
             while cur.more():
                 L, j, valid = cur.next_chunk()
                 rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(cur.active, L, K)
-                q, _, _ = _quad_coefs(rows, center, valid)
-                alpha = _alpha_raw(geo, q).clamp_(max=ALPHA_MAX)
-                torch.nn.functional.threshold_(alpha, th, 0.0)
-                nT, w = _transmittance(alpha, T, check_termination=on_cpu)
-                acc.baddbmm_(w.permute(1, 0, 2), rows[..., 6:])
-                T = nT[:, :, -1]
+                if kernel is None:
+                    contrib, T = forward_chunk(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
+                else:
+                    contrib, T = kernel(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, False)
+                acc += contrib
                 kept, gone = cur.advance(L, T)
                 if kept is not None:
                     out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
@@ -413,7 +431,7 @@ class _RasterizeFn(torch.autograd.Function):
         o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
         g_rows = g_rows.t()
         return (g_rows[:, 0:2], g_rows[:, 2:5], g_rows[:, 5] / o_safe, g_rows[:, 6:6 + D],
-                None, None, None, None, None, None, None, None)
+                None, None, None, None, None, None, None, None, None)
 
 
 def rasterize_to_pixels(
@@ -458,19 +476,23 @@ def rasterize_packed(
     tile_size: int = 16,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
+    kernel=None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair)."""
+    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair).
+
+    kernel: a drop-in for `forward_chunk` (the torch.compile'd one from `compiled.py`); None: eager."""
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH)
     return _composite(means2d, conics, opacities, colors.to(means2d.dtype), ent, counts, C, width, height,
-                      tile_size, chunk_elems, schedule)
+                      tile_size, chunk_elems, schedule, kernel)
 
 
-def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule):
+def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule,
+               kernel=None):
     if schedule not in ("auto", "compact", "masked"):
         raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
     compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     D = colors.shape[-1]
     acc = _RasterizeFn.apply(means2d, conics, opacities, colors, ent, counts, C, height, width, tile_size,
-                             chunk_elems, compact)
+                             chunk_elems, compact, kernel)
     return acc[..., :D], acc[..., D:]
