@@ -148,6 +148,7 @@ def run(cfg: DictConfig) -> dict:
     render_size = cfg.render.get("image_size")
     env_cfg = shaped_env_config(OmegaConf.to_container(cfg.env, resolve=True), policy,
                                 tuple(render_size) if render_size else None)
+    env_cfg.camera.render_backend = str(cfg.render.get("backend", "torch"))
     seed, device = int(cfg.seed), str(cfg.device)
     gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)
     eval_env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,

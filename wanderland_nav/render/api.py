@@ -22,6 +22,7 @@ from .sh import spherical_harmonics
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
+BACKENDS = ("torch", "compiled", "gsplat")
 
 
 def _check(cond: bool, msg: str) -> None:
@@ -271,8 +272,14 @@ def render(
     far_plane: float = 1e10,
     rasterize_mode: str = "classic",
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
+    backend: str = "torch",
 ) -> RenderOutput:
-    """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1]."""
+    """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1].
+
+    backend: "torch" (the packed eager fast path), "compiled" (its torch.compile'd hot stages) or
+    "gsplat" (gsplat's CUDA kernels, optional extra). All three take the same arguments.
+    """
+    _check(backend in BACKENDS, f"backend must be one of {BACKENDS}, got {backend!r}")
     g = gaussians
     viewmats = _as_tensor(cam_from_world, g.means, "cam_from_world", (4, 4))
     Ks = _as_tensor(K, g.means, "K", (3, 3))
@@ -283,10 +290,14 @@ def render(
     if background is not None and render_mode not in ("D", "ED"):
         bgs = _as_tensor(background, g.means, "background", (3,)).expand(C, 3)
     deg = g.sh_degree if sh_degree is None else sh_degree
-    colors, alphas, _ = rasterization(
+    raster = rasterization
+    if backend == "gsplat":
+        from .gsplat_backend import gsplat_rasterization as raster
+    colors, alphas, _ = raster(
         g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
         near_plane=near_plane, far_plane=far_plane, sh_degree=deg, backgrounds=bgs, render_mode=render_mode,
-        rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems)
+        rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
+        compiled=backend == "compiled")
     rgb = depth = None
     if render_mode.startswith("RGB"):
         rgb = colors[..., :3].clamp(0.0, 1.0)
