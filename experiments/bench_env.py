@@ -50,19 +50,21 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     td = policy(td)
     _, td = env.step_and_maybe_reset(td)  # warm-up (allocations, first-call costs)
     env.timings.clear()
-    env_time = 0.0
+    env_time = cpu_time = 0.0
     for _ in range(steps):
         td = policy(td)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         _, td = env.step_and_maybe_reset(td)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         env_time += time.perf_counter() - t0
+        cpu_time += time.process_time() - c0  # process CPU time: robust to a loaded machine, not to threads
     tm = env.timings
     render = tm["render"] + tm["reset_render"]
     share = lambda x: 100.0 * x / env_time  # noqa: E731
     return {
-        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "ms/step": 1e3 * env_time / steps,
+        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "fps/cpu-s": B * steps / cpu_time,
+        "ms/step": 1e3 * env_time / steps,
         "render%": share(render), "motion%": share(tm["physics"]), "rules%": share(tm["rules"]),
         "obs%": share(tm["observation"]), "torchrl%": share(env_time - tm["step"] - tm["reset_render"]),
     }
@@ -85,7 +87,7 @@ def main():
     scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
     print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
           f"{args.steps} timed steps after 1 warm-up")
-    cols = ["B", "res", "fps", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+    cols = ["B", "res", "fps", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
     print("  ".join(f"{c:>9}" for c in cols), flush=True)
     for B in args.batch:
         for res in args.res + ([] if args.no_off else [None]):

@@ -132,13 +132,22 @@ def _child(cfg: dict) -> dict:
     dev = cfg["device"]
     g, V, K = _scene(cfg["n"], cfg["C"], cfg["size"], dev)
     evals = [0]
-    orig = R._alpha_raw
+    orig = getattr(R, "_alpha_from_coefs", None)  # the new code's eager chunk kernel (old code: _alpha_raw)
 
-    def counting(geo, q):
-        evals[0] += geo.P * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
-        return orig(geo, q)
+    def counting(q, coords, *rest):
+        evals[0] += coords.numel() ** 2 * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
+        return orig(q, coords, *rest)
 
-    R._alpha_raw = counting
+    if orig is None:  # old code
+        orig_raw = R._alpha_raw
+
+        def counting(geo, q):  # noqa: F811
+            evals[0] += geo.P * q.shape[1] * q.shape[2]
+            return orig_raw(geo, q)
+
+        R._alpha_raw = counting
+    else:
+        R._alpha_from_coefs = counting
     fn = _baseline if cfg["impl"] == "baseline" else rasterization
     if cfg["impl"] == "compiled":
         fn = functools.partial(rasterization, compiled=True)
