@@ -46,7 +46,7 @@ def _sortable_int(x: torch.Tensor) -> torch.Tensor:
     if x.dtype == torch.float64:
         b = x.contiguous().view(torch.int64)
         return torch.where(b < 0, b ^ 0x7FFFFFFFFFFFFFFF, b)
-    b = x.to(torch.float32).contiguous().view(torch.int32).to(torch.int64)
+    b = x.to(torch.float32).contiguous().view(torch.int32)  # int32 keys sort ~1.5x faster than int64 on CPU
     return torch.where(b < 0, b ^ 0x7FFFFFFF, b)
 
 
@@ -100,6 +100,8 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         wg = wx_o.index_select(0, src)
         dy = torch.div(k, wg, rounding_mode="floor")
         tile = first_tile.index_select(0, src) + dy * tile_width + (k - dy * wg)
+        if num_tiles < 2**31:  # narrower keys: the sort of all tile entries is the binning's largest cost
+            tile = tile.to(torch.int32)
         tile, perm = torch.sort(tile, stable=True)
         ent = order.index_select(0, src.index_select(0, perm))
         counts = torch.bincount(tile, minlength=num_tiles)
