@@ -94,6 +94,34 @@ def rasterization(
                     (thin_prism_coeffs, "thin_prism_coeffs")):
         if t is not None:
             raise NotImplementedError(f"rasterization: {name} (lens distortion) is not supported")
+    batch, N, C, covars, per_camera = _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
+                                                    backgrounds, sh_degree, width, height)
+    dtype = means.dtype
+    viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
+    if tile_size is None:
+        tile_size = 4 if means.device.type == "cpu" else 16
+    _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
+    B = math.prod(batch)
+    flat = lambda t: t.reshape((B,) + t.shape[len(batch):]) if t is not None else None  # noqa: E731  [B, ...]
+    opts = dict(width=int(width), height=int(height), near_plane=near_plane, far_plane=far_plane,
+                radius_clip=radius_clip, eps2d=eps2d, sh_degree=sh_degree, tile_size=tile_size,
+                render_mode=render_mode, rasterize_mode=rasterize_mode, camera_model=camera_model,
+                chunk_elems=chunk_elems, schedule=schedule)
+    args = tuple(map(flat, (means, covars, opacities, colors, viewmats, Ks, backgrounds)))
+    if packed:
+        colors_out, alphas, meta = _rasterize_packed(*args, per_camera=per_camera, compiled=compiled, **opts)
+    else:  # the dense reference, one scene at a time (the batch dims are independent scenes)
+        outs = [_rasterize_dense(*(None if x is None else x[b] for x in args), **opts) for b in range(B)]
+        colors_out, alphas = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
+        meta = outs[0][2] if not batch else {k: ([o[2][k] for o in outs] if torch.is_tensor(v) else v)
+                                               for k, v in outs[0][2].items()}
+    shape = lambda t: t.reshape(batch + (C,) + t.shape[-3:])  # noqa: E731  [B*C or B, C, H, W, X] -> [..., C, H, W, X]
+    return shape(colors_out), shape(alphas), meta
+
+
+def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
+                  height):
+    """Validate gsplat's shapes with leading batch dims; -> (batch, N, C, covars [..., N, 3, 3], per_camera)."""
     batch = tuple(means.shape[:-2])
     _check(means.dim() >= 2 and means.shape[-1] == 3, f"means must be [..., N, 3], got {tuple(means.shape)}")
     _check(viewmats.dim() == len(batch) + 3 and tuple(viewmats.shape[:-3]) == batch and viewmats.shape[-2:] == (4, 4),
@@ -116,30 +144,10 @@ def rasterization(
                f"colors must be SH [..., N, K, 3] or [..., C, N, K, 3] with sh_degree, got {tuple(colors.shape)}")
     per_camera = colors.dim() - len(batch) == (3 if sh_degree is None else 4)
     _check(not per_camera or colors.shape[len(batch)] == C, f"colors has {colors.shape[len(batch)]} cameras, viewmats {C}")
-    dtype = means.dtype
-    viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
-    if tile_size is None:
-        tile_size = 4 if means.device.type == "cpu" else 16
-    _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
-    B = math.prod(batch)
-    flat = lambda t: t.reshape((B,) + t.shape[len(batch):]) if t is not None else None  # noqa: E731  [B, ...]
     if backgrounds is not None:
         _check(tuple(backgrounds.shape[:-1]) == batch + (C,),
                f"backgrounds must be [..., C, D]={list(batch + (C,))} + [D], got {tuple(backgrounds.shape)}")
-    opts = dict(width=int(width), height=int(height), near_plane=near_plane, far_plane=far_plane,
-                radius_clip=radius_clip, eps2d=eps2d, sh_degree=sh_degree, tile_size=tile_size,
-                render_mode=render_mode, rasterize_mode=rasterize_mode, camera_model=camera_model,
-                chunk_elems=chunk_elems, schedule=schedule)
-    args = tuple(map(flat, (means, covars, opacities, colors, viewmats, Ks, backgrounds)))
-    if packed:
-        colors_out, alphas, meta = _rasterize_packed(*args, per_camera=per_camera, compiled=compiled, **opts)
-    else:  # the dense reference, one scene at a time (the batch dims are independent scenes)
-        outs = [_rasterize_dense(*(None if x is None else x[b] for x in args), **opts) for b in range(B)]
-        colors_out, alphas = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
-        meta = outs[0][2] if not batch else {k: ([o[2][k] for o in outs] if torch.is_tensor(v) else v)
-                                               for k, v in outs[0][2].items()}
-    shape = lambda t: t.reshape(batch + (C,) + t.shape[-3:])  # noqa: E731  [B*C or B, C, H, W, X] -> [..., C, H, W, X]
-    return shape(colors_out), shape(alphas), meta
+    return batch, N, C, covars, per_camera
 
 
 def _view_colors(colors, sh_degree, means_rows, campos_rows):
