@@ -1,7 +1,7 @@
 """Benchmark NavEnv: environment frames per second and where a step's time goes.
 
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
-                                    [--device cpu|cuda] [--threads 2]
+                                    [--device cpu|cuda] [--threads 2] [--max-gaussians 10000] [--no-off]
 
 For every (resolution, B) it builds a NavEnv on the demo scene (built and prepared on first use,
 episodes generated if missing), drives it with the expert policy through `step_and_maybe_reset`
@@ -20,11 +20,12 @@ from pathlib import Path
 import torch
 
 
-def prepare(preset: str, root: Path, num_episodes: int):
+def prepare(preset: str, root: Path, num_episodes: int, max_gaussians: int | None = None):
     from planners import NavMesh
     from wanderland_nav.episodes.generate import write_scene_episodes
-    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.render import Gaussians
+    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.scene import load_scene
 
     scene = ensure_demo_scene(root / preset, seed=0, preset=preset)
@@ -33,7 +34,7 @@ def prepare(preset: str, root: Path, num_episodes: int):
     if not episodes.is_file():
         write_scene_episodes(scene, navmesh, episodes, num_episodes=num_episodes, seed=0)
         scene = load_scene(scene.root)
-    return scene, navmesh, Gaussians.load(scene.gaussians_path)
+    return scene, navmesh, lod_subset(Gaussians.load(scene.gaussians_path), max_gaussians)  # training's LOD subset
 
 
 def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True):
@@ -51,19 +52,21 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     td = policy(td)
     _, td = env.step_and_maybe_reset(td)  # warm-up (allocations, first-call costs)
     env.timings.clear()
-    env_time = 0.0
+    env_time = cpu_time = 0.0
     for _ in range(steps):
         td = policy(td)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         _, td = env.step_and_maybe_reset(td)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         env_time += time.perf_counter() - t0
+        cpu_time += time.process_time() - c0  # process CPU time: robust to a loaded machine, not to threads
     tm = env.timings
     render = tm["render"] + tm["reset_render"]
     share = lambda x: 100.0 * x / env_time  # noqa: E731
     return {
-        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "ms/step": 1e3 * env_time / steps,
+        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "fps/cpu-s": B * steps / cpu_time,
+        "ms/step": 1e3 * env_time / steps,
         "render%": share(render), "motion%": share(tm["physics"]), "rules%": share(tm["rules"]),
         "obs%": share(tm["observation"]), "torchrl%": share(env_time - tm["step"] - tm["reset_render"]),
     }
@@ -79,15 +82,17 @@ def main():
     ap.add_argument("--episodes", type=int, default=60)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--max-gaussians", type=int, default=None, help="render.max_gaussians LOD (default: all)")
+    ap.add_argument("--no-off", action="store_true", help="skip the camera-off row")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes)
+    scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
     print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
           f"{args.steps} timed steps after 1 warm-up")
-    cols = ["B", "res", "fps", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+    cols = ["B", "res", "fps", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
     print("  ".join(f"{c:>9}" for c in cols), flush=True)
     for B in args.batch:
-        for res in args.res + [None]:
+        for res in args.res + ([] if args.no_off else [None]):
             r = bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device, enabled=res is not None)
             print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols), flush=True)
 

@@ -13,8 +13,17 @@ A "straightforward" baseline (per-tile Python loop, dense autograd over each til
 no chunking, no early termination, no custom backward) is included for comparison on the same
 scene and machine state (`--baseline`).
 
+Env operating points (`--env`): the Gaussians (all, or training's `--max-gaussians` LOD) and the B
+agent cameras of a `NavEnv` reset on the tiny demo scene; prints a per-stage CPU-time profile of
+the dense reference (projection, colours, binning, composite) and of the packed fast path, then
+renders/s of `render()` (eager) and of the compiled path, and the PSNR between the two. The stage
+functions exist in both the old and the new code, so `PYTHONPATH=<old checkout>` profiles the old.
+
 Usage:
   python experiments/bench_render.py                     # quick table (CPU, 2 threads)
+  python experiments/bench_render.py --env --batch 64 --res 32 --max-gaussians 10000 [--compiled]
+  python experiments/bench_render.py --only 50000,64,1,fwd --compiled   # compiled vs eager rows
+  python experiments/bench_render.py --psnr 64           # compiled vs eager PSNR on guitar.ply, playbot.ply
   python experiments/bench_render.py --threads 1 --baseline
   python experiments/bench_render.py --full              # every N x size x C combination
   python experiments/bench_render.py --device cuda       # when a GPU is available
@@ -23,6 +32,7 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -122,14 +132,25 @@ def _child(cfg: dict) -> dict:
     dev = cfg["device"]
     g, V, K = _scene(cfg["n"], cfg["C"], cfg["size"], dev)
     evals = [0]
-    orig = R._alpha_raw
+    orig = getattr(R, "_alpha_from_coefs", None)  # the new code's eager chunk kernel (old code: _alpha_raw)
 
-    def counting(geo, q):
-        evals[0] += geo.P * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
-        return orig(geo, q)
+    def counting(q, coords, *rest):
+        evals[0] += coords.numel() ** 2 * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
+        return orig(q, coords, *rest)
 
-    R._alpha_raw = counting
+    if orig is None:  # old code
+        orig_raw = R._alpha_raw
+
+        def counting(geo, q):  # noqa: F811
+            evals[0] += geo.P * q.shape[1] * q.shape[2]
+            return orig_raw(geo, q)
+
+        R._alpha_raw = counting
+    else:
+        R._alpha_from_coefs = counting
     fn = _baseline if cfg["impl"] == "baseline" else rasterization
+    if cfg["impl"] == "compiled":
+        fn = functools.partial(rasterization, compiled=True)
     params = [g.means, g.quats, g.scales, g.opacities, g.sh_coeffs]
 
     def once():
@@ -171,10 +192,27 @@ def main() -> None:
     ap.add_argument("--baseline", action="store_true", help="also run the straightforward baseline (100k, 128^2)")
     ap.add_argument("--only", default=None, help="n,size,C[,fwd|bwd] for a single configuration")
     ap.add_argument("--json", default=None, help="append results as JSON lines to this file")
+    ap.add_argument("--compiled", action="store_true", help="also time rasterization(compiled=True)")
+    ap.add_argument("--env", action="store_true", help="profile the env's operating point (see above)")
+    ap.add_argument("--batch", type=int, default=64)
+    ap.add_argument("--res", type=int, default=32)
+    ap.add_argument("--max-gaussians", type=int, default=None)
+    ap.add_argument("--psnr", type=int, default=None, help="compiled vs eager PSNR at this size on the real splats")
     ap.add_argument("--_child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a._child:
         print(json.dumps(_child(json.loads(a._child))))
+        return
+    if a.env or a.psnr:
+        import torch
+
+        torch.set_num_threads(a.threads)
+        print(f"threads={a.threads}; load avg {os.getloadavg()}")
+        from render_env_profile import env_profile, splat_psnr
+        if a.env:
+            env_profile(a.batch, a.res, a.max_gaussians, a.repeat, a.compiled)
+        else:
+            splat_psnr(a.psnr, a.threads)
         return
 
     if a.only:
@@ -188,7 +226,7 @@ def main() -> None:
         grid = [(10_000, 128, 1, b) for b in (False, True)] + [(100_000, s, 1, b) for s in (64, 128, 256)
                                                                  for b in (False, True)]
         grid += [(100_000, 128, 16, False), (1_000_000, 256, 1, False), (1_000_000, 256, 1, True)]
-    impls = ["fast"] + (["baseline"] if a.baseline else [])
+    impls = ["fast"] + (["compiled"] if a.compiled else []) + (["baseline"] if a.baseline else [])
     print(f"device={a.device} threads={a.threads} repeat={a.repeat} torch-threads; load avg {os.getloadavg()}")
     hdr = (f"{'impl':8} {'N':>8} {'HxW':>8} {'C':>3} {'pass':>8} {'wall s':>8} {'cpu s':>8} {'renders/s':>10} "
            f"{'Mevals/s':>9} {'+peak MiB':>10} {'total MiB':>10}")

@@ -35,18 +35,29 @@ def _inputs(cfg: dict, dtype, seed=0):
     return args, cfg
 
 
+@pytest.mark.parametrize("packed", [True, False], ids=["packed", "dense"])
 @pytest.mark.parametrize("dtype", [torch.float64, torch.float32], ids=["f64", "f32"])
 @pytest.mark.parametrize("name", list(CONFIGS))
-def test_matches_dense_reference(name, dtype):
+def test_matches_dense_reference(name, dtype, packed):
+    """Both the packed fast path and the eager dense path against the per-pixel dense reference."""
     args, kw = _inputs(CONFIGS[name], dtype)
-    colors, alphas, meta = rasterization(*args, W, H, tile_size=8, chunk_elems=4096, **kw)
+    colors, alphas, meta = rasterization(*args, W, H, tile_size=8, chunk_elems=4096, packed=packed, **kw)
     ref_c, ref_a = dense_rasterization(*args, W, H, **kw)
     tol = 1e-10 if dtype == torch.float64 else 1e-5
     assert colors.shape == ref_c.shape and alphas.shape == (2, H, W, 1)
     assert (alphas > 0.5).float().mean() > (0.05 if "culling" in name else 0.2)  # the scene covers the image
     torch.testing.assert_close(colors, ref_c, atol=tol, rtol=0)
     torch.testing.assert_close(alphas, ref_a, atol=tol, rtol=0)
-    assert meta["radii"].shape == (2, args[0].shape[0], 2) and meta["means2d"].shape == (2, args[0].shape[0], 2)
+    if not packed:
+        assert meta["radii"].shape == (2, args[0].shape[0], 2) and meta["means2d"].shape == (2, args[0].shape[0], 2)
+        return
+    # packed meta (gsplat layout): exactly the dense path's visible pairs, in camera-major order
+    dense = rasterization(*args, W, H, packed=False, **kw)[2]
+    cam, gid = (dense["radii"] > 0).all(-1).nonzero(as_tuple=True)
+    assert torch.equal(meta["camera_ids"], cam) and torch.equal(meta["gaussian_ids"], gid)
+    torch.testing.assert_close(meta["means2d"], dense["means2d"][cam, gid], atol=tol, rtol=0)
+    torch.testing.assert_close(meta["conics"], dense["conics"][cam, gid], atol=tol, rtol=tol)
+    assert torch.equal(meta["radii"], dense["radii"][cam, gid])
 
 
 def test_termination_really_happens_and_hidden_gaussians_get_no_gradient():
@@ -155,7 +166,7 @@ def test_gpu_and_cpu_schedules_agree_with_reference(schedule):
 def test_meta_means2d_receives_gradient():
     args, _ = _inputs({}, torch.float64)
     args[0].requires_grad_(True)
-    c, a, meta = rasterization(*args, W, H)
+    c, a, meta = rasterization(*args, W, H, packed=False)
     meta["means2d"].retain_grad()
     c.sum().backward()
     visible = (meta["radii"] > 0).all(-1)
@@ -170,7 +181,7 @@ def test_fisheye_is_equidistant():
     K = torch.tensor([[[50.0, 0, 100], [0, 50.0, 100], [0, 0, 1]]], dtype=d)
     _, _, meta = rasterization(means, torch.tensor([[1.0, 0, 0, 0]] * 3, dtype=d), torch.full((3, 3), 0.01, dtype=d),
                                torch.full((3,), 0.9, dtype=d), torch.rand(3, 3, dtype=d), torch.eye(4, dtype=d)[None],
-                               K, 200, 200, camera_model="fisheye")
+                               K, 200, 200, camera_model="fisheye", packed=False)
     torch.testing.assert_close(meta["means2d"][0, :, 0] - 100, 50 * theta, atol=1e-5, rtol=0)
 
 

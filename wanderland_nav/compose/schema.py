@@ -95,6 +95,7 @@ class EpisodeSource:
 class RenderSettings:
     max_gaussians: Optional[int] = 10000  # level of detail (render/lod.py); null: all
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
+    backend: str = "torch"  # torch (packed eager) | compiled (torch.compile'd stages) | gsplat (CUDA extra)
 
 
 @dataclass

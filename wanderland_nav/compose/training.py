@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -50,6 +51,7 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     run_dir = checked_run_dir(c, identity)
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
+    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
                  gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
     eval_env = env_factory(scene, episodes_path, env_cfg, split=c.eval.split, batch_size=c.eval.batch_size, **parts)()

@@ -22,7 +22,8 @@ from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_in
 
 Renderer = Callable[..., object]
 """`render(gaussians, cam_from_world[C,4,4], K[C,3,3], width, height, *, render_mode, background,
-camera_model) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or None` (render.render)."""
+camera_model[, backend]) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or None` (render.render);
+`backend` is passed only when `CameraConfig.render_backend` is not the default "torch"."""
 
 
 def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
@@ -67,6 +68,7 @@ class AgentCamera:
             return rgb, depth
         viewmats = self.cam_from_world(position_nav, yaw)
         mode = "RGB+ED" if self.cfg.depth else "RGB"
+        extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
         for s in range(0, B, self.cfg.render_chunk):  # chunks bound peak memory; each call is batched
             e = min(B, s + self.cfg.render_chunk)
             out = self.renderer(
@@ -78,6 +80,7 @@ class AgentCamera:
                 render_mode=mode,
                 background=self.background,
                 camera_model=self.cfg.camera_model,
+                **extra,
             )
             rgb[s:e] = (out.rgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
             if depth is not None:

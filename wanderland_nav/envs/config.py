@@ -16,6 +16,7 @@ ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")
 EPISODE_ORDERS = ("sample", "iterate")
 GOAL_IMAGE_MODES = ("auto", "render", "none")
+RENDER_BACKENDS = ("torch", "compiled", "gsplat")
 
 
 @dataclass
@@ -33,6 +34,7 @@ class CameraConfig:
     history: int = 5  # T frames in keys.RGB (CityWalker: 5 context frames)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] where nothing is hit
     render_chunk: int = 64  # cameras per render() call, bounds the renderer's peak memory
+    render_backend: str = "torch"  # "torch" | "compiled" (torch.compile'd hot stages) | "gsplat" (CUDA, extra)
 
 
 @dataclass
@@ -100,6 +102,7 @@ class NavEnvConfig:
             ("camera.camera_model", c.camera_model in CAMERA_MODELS, c.camera_model),
             ("camera.history", c.history >= 1, c.history),
             ("camera.render_chunk", c.render_chunk >= 1, c.render_chunk),
+            ("camera.render_backend", c.render_backend in RENDER_BACKENDS, c.render_backend),
             ("camera.background", len(c.background) == 3, c.background),
             ("kinematics.action_mode", k.action_mode in ACTION_MODES, k.action_mode),
             ("kinematics.num_waypoints", k.num_waypoints >= 1, k.num_waypoints),

@@ -2,7 +2,10 @@
 
 `rasterization(...)` follows gsplat 1.5's signature and return layout so either backend can be
 swapped in; `render(gaussians, cam_from_world, K, width, height)` is the thin call the rest of the
-framework uses.
+framework uses. Paths: `packed=True` (default) is the fast path for many cameras (`packed.py`),
+`packed=False` the eager dense reference (`projection.py`), `compiled=True` / `backend="compiled"`
+the torch.compile'd hot stages (`compiled.py`), `backend="gsplat"` gsplat's CUDA kernels
+(`gsplat_backend.py`, optional extra).
 """
 
 from .api import RenderOutput, rasterization, render

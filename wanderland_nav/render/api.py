@@ -8,18 +8,21 @@ raw `Gaussians` in, activated here, RGB in [0, 1] plus optional depth and alpha 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from .gaussians import Gaussians
+from .packed import project_packed
 from .projection import CAMERA_MODELS, project_gaussians, quat_scale_to_covar
-from .rasterize import DEFAULT_CHUNK_ELEMS, rasterize_to_pixels
+from .rasterize import DEFAULT_CHUNK_ELEMS, rasterize_packed, rasterize_to_pixels
 from .sh import spherical_harmonics
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
+BACKENDS = ("torch", "compiled", "gsplat")
 
 
 def _check(cond: bool, msg: str) -> None:
@@ -28,13 +31,13 @@ def _check(cond: bool, msg: str) -> None:
 
 
 def rasterization(
-    means: torch.Tensor,  # [N, 3] world
-    quats: torch.Tensor | None,  # [N, 4] wxyz, need not be normalised
-    scales: torch.Tensor | None,  # [N, 3] activated (std devs)
-    opacities: torch.Tensor,  # [N] activated, in [0, 1]
-    colors: torch.Tensor,  # [(C,) N, D] or SH [(C,) N, K, 3] with sh_degree
-    viewmats: torch.Tensor,  # [C, 4, 4] cam_from_world
-    Ks: torch.Tensor,  # [C, 3, 3]
+    means: torch.Tensor,  # [..., N, 3] world
+    quats: torch.Tensor | None,  # [..., N, 4] wxyz, need not be normalised
+    scales: torch.Tensor | None,  # [..., N, 3] activated (std devs)
+    opacities: torch.Tensor,  # [..., N] activated, in [0, 1]
+    colors: torch.Tensor,  # [..., (C,) N, D] or SH [..., (C,) N, K, 3] with sh_degree
+    viewmats: torch.Tensor,  # [..., C, 4, 4] cam_from_world
+    Ks: torch.Tensor,  # [..., C, 3, 3]
     width: int,
     height: int,
     near_plane: float = 0.01,
@@ -44,7 +47,7 @@ def rasterization(
     sh_degree: int | None = None,
     packed: bool = True,
     tile_size: int | None = None,
-    backgrounds: torch.Tensor | None = None,  # [C, D]
+    backgrounds: torch.Tensor | None = None,  # [..., C, D]
     render_mode: str = "RGB",
     sparse_grad: bool = False,
     absgrad: bool = False,
@@ -53,7 +56,7 @@ def rasterization(
     distributed: bool = False,
     camera_model: str = "pinhole",
     segmented: bool = False,
-    covars: torch.Tensor | None = None,  # [N, 3, 3] instead of quats/scales
+    covars: torch.Tensor | None = None,  # [..., N, 3, 3] instead of quats/scales
     with_ut: bool = False,
     with_eval3d: bool = False,
     radial_coeffs: torch.Tensor | None = None,
@@ -62,16 +65,24 @@ def rasterization(
     *,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
+    compiled: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Render N Gaussians into C cameras with gsplat 1.5 semantics (see `rasterize.py`).
 
-    `packed`, `channel_chunk` and `segmented` only change how gsplat schedules its CUDA work; the
-    images are the same, and `meta` always uses the dense `[C, N, ...]` layout. `tile_size` is a
+    Leading batch dims `[...]` are independent scenes (each camera sees only its own scene's
+    Gaussians); outputs are `[..., C, H, W, X]`. `packed=True` (gsplat's default) is the fast path
+    (`packed.py`: only visible camera-Gaussian pairs are projected, one binning for all cameras) and
+    `meta` holds `[nnz]` arrays with `camera_ids`, `gaussian_ids` (and `batch_ids`), as gsplat's
+    packed mode; `packed=False` is the eager dense reference with `[C, N, ...]` meta (per scene, a
+    list over the flattened batch when there are batch dims). Both give the same images.
+    `channel_chunk` and `segmented` only schedule gsplat's CUDA work and are ignored. `tile_size` is a
     pure performance knob here too (results do not depend on it); None picks 4 on CPU, where small
     tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
-    lens distortion coefficients) raise instead of being silently ignored.
+    lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
+    packed path's hot stages through torch.compile (`compiled.py`; eager fallback with one warning).
     """
+    _check(packed or not compiled, "compiled=True is a variant of the packed fast path; pass packed=True")
     _check(render_mode in RENDER_MODES, f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     _check(rasterize_mode in RASTERIZE_MODES, f"rasterize_mode must be one of {RASTERIZE_MODES}, got {rasterize_mode!r}")
     _check(camera_model in CAMERA_MODELS, f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
@@ -83,75 +94,158 @@ def rasterization(
                     (thin_prism_coeffs, "thin_prism_coeffs")):
         if t is not None:
             raise NotImplementedError(f"rasterization: {name} (lens distortion) is not supported")
-    N = means.shape[0]
-    _check(means.dim() == 2 and means.shape[1] == 3, f"means must be [N, 3], got {tuple(means.shape)}")
-    _check(opacities.shape == (N,), f"opacities must be [N]={N}, got {tuple(opacities.shape)}")
-    _check(viewmats.dim() == 3 and viewmats.shape[1:] == (4, 4), f"viewmats must be [C, 4, 4], got {tuple(viewmats.shape)}")
-    C = viewmats.shape[0]
-    _check(Ks.shape == (C, 3, 3), f"Ks must be [C, 3, 3]=[{C}, 3, 3], got {tuple(Ks.shape)}")
-    _check(int(width) > 0 and int(height) > 0, f"width/height must be positive, got {width}x{height}")
-    if covars is None:
-        _check(quats is not None and quats.shape == (N, 4), f"quats must be [N, 4], got {getattr(quats, 'shape', None)}")
-        _check(scales is not None and scales.shape == (N, 3), f"scales must be [N, 3], got {getattr(scales, 'shape', None)}")
-        covars = quat_scale_to_covar(quats, scales)
-    else:
-        _check(covars.shape == (N, 3, 3), f"covars must be [N, 3, 3], got {tuple(covars.shape)}")
+    batch, N, C, covars, per_camera = _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
+                                                    backgrounds, sh_degree, width, height)
     dtype = means.dtype
     viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
     if tile_size is None:
         tile_size = 4 if means.device.type == "cpu" else 16
     _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
+    B = math.prod(batch)
+    flat = lambda t: t.reshape((B,) + t.shape[len(batch):]) if t is not None else None  # noqa: E731  [B, ...]
+    opts = dict(width=int(width), height=int(height), near_plane=near_plane, far_plane=far_plane,
+                radius_clip=radius_clip, eps2d=eps2d, sh_degree=sh_degree, tile_size=tile_size,
+                render_mode=render_mode, rasterize_mode=rasterize_mode, camera_model=camera_model,
+                chunk_elems=chunk_elems, schedule=schedule)
+    args = tuple(map(flat, (means, covars, opacities, colors, viewmats, Ks, backgrounds)))
+    if packed:
+        colors_out, alphas, meta = _rasterize_packed(*args, per_camera=per_camera, compiled=compiled, **opts)
+    else:  # the dense reference, one scene at a time (the batch dims are independent scenes)
+        outs = [_rasterize_dense(*(None if x is None else x[b] for x in args), **opts) for b in range(B)]
+        colors_out, alphas = torch.stack([o[0] for o in outs]), torch.stack([o[1] for o in outs])
+        meta = outs[0][2] if not batch else {k: ([o[2][k] for o in outs] if torch.is_tensor(v) else v)
+                                               for k, v in outs[0][2].items()}
+    shape = lambda t: t.reshape(batch + (C,) + t.shape[-3:])  # noqa: E731  [B*C or B, C, H, W, X] -> [..., C, H, W, X]
+    return shape(colors_out), shape(alphas), meta
 
-    proj = project_gaussians(means, covars, viewmats, Ks, int(width), int(height), eps2d=eps2d,
+
+def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
+                  height):
+    """Validate gsplat's shapes with leading batch dims; -> (batch, N, C, covars [..., N, 3, 3], per_camera)."""
+    batch = tuple(means.shape[:-2])
+    _check(means.dim() >= 2 and means.shape[-1] == 3, f"means must be [..., N, 3], got {tuple(means.shape)}")
+    _check(viewmats.dim() == len(batch) + 3 and tuple(viewmats.shape[:-3]) == batch and viewmats.shape[-2:] == (4, 4),
+           f"viewmats must be [..., C, 4, 4] with the batch dims {batch} of means, got {tuple(viewmats.shape)}")
+    _check(int(width) > 0 and int(height) > 0, f"width/height must be positive, got {width}x{height}")
+    N, C = means.shape[-2], viewmats.shape[-3]
+    _check(opacities.shape == batch + (N,), f"opacities must be [..., N]={list(batch + (N,))}, got {tuple(opacities.shape)}")
+    _check(Ks.shape == batch + (C, 3, 3), f"Ks must be [..., C, 3, 3]={list(batch + (C, 3, 3))}, got {tuple(Ks.shape)}")
+    if covars is None:
+        _check(quats is not None and quats.shape == batch + (N, 4), f"quats must be [..., N, 4], got {getattr(quats, 'shape', None)}")
+        _check(scales is not None and scales.shape == batch + (N, 3), f"scales must be [..., N, 3], got {getattr(scales, 'shape', None)}")
+        covars = quat_scale_to_covar(quats, scales)
+    else:
+        _check(covars.shape == batch + (N, 3, 3), f"covars must be [..., N, 3, 3], got {tuple(covars.shape)}")
+    if sh_degree is None:
+        _check(colors.dim() - len(batch) in (2, 3) and colors.shape[-2] == N,
+               f"colors must be [..., N, D] or [..., C, N, D] without sh_degree, got {tuple(colors.shape)}")
+    else:
+        _check(colors.dim() - len(batch) in (3, 4) and colors.shape[-1] == 3 and colors.shape[-3] == N,
+               f"colors must be SH [..., N, K, 3] or [..., C, N, K, 3] with sh_degree, got {tuple(colors.shape)}")
+    per_camera = colors.dim() - len(batch) == (3 if sh_degree is None else 4)
+    _check(not per_camera or colors.shape[len(batch)] == C, f"colors has {colors.shape[len(batch)]} cameras, viewmats {C}")
+    if backgrounds is not None:
+        _check(tuple(backgrounds.shape[:-1]) == batch + (C,),
+               f"backgrounds must be [..., C, D]={list(batch + (C,))} + [D], got {tuple(backgrounds.shape)}")
+    return batch, N, C, covars, per_camera
+
+
+def _view_colors(colors, sh_degree, means_rows, campos_rows):
+    """Colours [..., D] of (camera, Gaussian) rows: `colors` already gathered per row (plain [..., D] or
+    SH [..., K, 3]); SH is evaluated along the camera-to-Gaussian direction with gsplat's +0.5, clamp 0."""
+    if sh_degree is None:
+        return colors
+    return torch.clamp_min(spherical_harmonics(sh_degree, means_rows - campos_rows, colors) + 0.5, 0.0)
+
+
+def _depth_channels(cols, depths, bgs, render_mode):
+    """Append / substitute camera depth as the last channel for the depth render modes (bgs [C, D] or None)."""
+    if render_mode in ("RGB+D", "RGB+ED"):
+        cols = torch.cat([cols, depths[..., None]], -1)
+        bgs = None if bgs is None else torch.cat([bgs, bgs.new_zeros(bgs.shape[0], 1)], -1)
+    elif render_mode in ("D", "ED"):
+        cols = depths[..., None]
+        bgs = None if bgs is None else bgs.new_zeros(bgs.shape[0], 1)
+    return cols, bgs
+
+
+def _finish(render_colors, render_alphas, bgs, render_mode):
+    if bgs is not None:
+        render_colors = render_colors + (1.0 - render_alphas) * bgs[:, None, None, :]
+    if render_mode in ("ED", "RGB+ED"):
+        render_colors = torch.cat([render_colors[..., :-1],
+                                   render_colors[..., -1:] / render_alphas.clamp_min(1e-10)], -1)
+    return render_colors
+
+
+def _meta(width, height, tile_size, n_cameras, render_mode, camera_model, rasterize_mode, **arrays):
+    TW, TH = -(-width // tile_size), -(-height // tile_size)
+    return dict(**arrays, tile_width=TW, tile_height=TH, tile_size=tile_size, width=width, height=height,
+                n_cameras=n_cameras, render_mode=render_mode, camera_model=camera_model, rasterize_mode=rasterize_mode)
+
+
+def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, backgrounds, *, per_camera, compiled, width, height,
+                      near_plane, far_plane, radius_clip, eps2d, sh_degree, tile_size, render_mode, rasterize_mode,
+                      camera_model, chunk_elems, schedule):
+    """Fast path for B scenes x C cameras (means [B,N,3], viewmats [B,C,4,4]): packed projection of the
+    shared Gaussians, colours for the visible pairs only, one binning and composite for all B*C cameras."""
+    B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
+    project, kernel = project_packed, None
+    if compiled:
+        from .compiled import forward_chunk_compiled, project_packed_compiled
+
+        project, kernel = project_packed_compiled, forward_chunk_compiled
+    cam, gid, proj = project(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
+                                    near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
+                                    calc_compensations=rasterize_mode == "antialiased", camera_model=camera_model)
+    opac = opacities.reshape(B * N).index_select(0, gid)
+    if proj.compensations is not None:
+        opac = opac * proj.compensations
+    src = colors.reshape((B * C * N if per_camera else B * N,) + colors.shape[3 if per_camera else 2:])
+    rows = src.index_select(0, cam * N + gid % N if per_camera else gid)
+    campos = None
+    if sh_degree is not None:
+        campos = torch.linalg.inv(viewmats)[..., :3, 3].reshape(B * C, 3).index_select(0, cam)
+    cols = _view_colors(rows, sh_degree, means.reshape(B * N, 3).index_select(0, gid), campos).to(means.dtype)
+    bgs = None if backgrounds is None else backgrounds.reshape(B * C, -1).to(means.dtype)
+    cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
+    render_colors, render_alphas = rasterize_packed(
+        cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, B * C, width, height,
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, kernel=kernel)
+    meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=cam % C,
+                 gaussian_ids=gid % N, batch_ids=torch.div(cam, C, rounding_mode="floor"), radii=proj.radii,
+                 means2d=proj.means2d, depths=proj.depths, conics=proj.conics, opacities=opac,
+                 compensations=proj.compensations)
+    return _finish(render_colors, render_alphas, bgs, render_mode), render_alphas, meta
+
+
+def _rasterize_dense(means, covars, opacities, colors, viewmats, Ks, backgrounds, *, width, height, near_plane,
+                     far_plane, radius_clip, eps2d, sh_degree, tile_size, render_mode, rasterize_mode, camera_model,
+                     chunk_elems, schedule):
+    """The eager reference: dense [C, N] projection of one scene (means [N,3], viewmats [C,4,4])."""
+    C, N = viewmats.shape[0], means.shape[0]
+    proj = project_gaussians(means, covars, viewmats, Ks, width, height, eps2d=eps2d,
                              near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                              opacities=opacities, calc_compensations=rasterize_mode == "antialiased",
                              camera_model=camera_model)
     opac = opacities[None].expand(C, N)
     if proj.compensations is not None:
         opac = opac * proj.compensations
-
-    # colours per camera [C, N, D]
-    if sh_degree is None:
-        _check(colors.dim() in (2, 3) and colors.shape[-2] == N,
-               f"colors must be [N, D] or [C, N, D] without sh_degree, got {tuple(colors.shape)}")
-        cols = colors.expand(C, N, colors.shape[-1]) if colors.dim() == 2 else colors
-        _check(cols.shape[0] == C, f"colors has {cols.shape[0]} cameras, viewmats {C}")
-    else:
-        _check(colors.dim() in (3, 4) and colors.shape[-1] == 3 and colors.shape[-3] == N,
-               f"colors must be SH [N, K, 3] or [C, N, K, 3] with sh_degree, got {tuple(colors.shape)}")
-        campos = torch.linalg.inv(viewmats)[:, :3, 3]  # [C, 3] camera centres (differentiable in viewmats)
-        dirs = means[None, :, :] - campos[:, None, :]  # [C, N, 3]
-        shs = colors if colors.dim() == 4 else colors[None].expand(C, *colors.shape)
-        cols = torch.clamp_min(spherical_harmonics(sh_degree, dirs, shs) + 0.5, 0.0)
-    cols = cols.to(dtype)
-    D_rgb = cols.shape[-1]
-    bgs = None
-    if backgrounds is not None:
-        _check(backgrounds.shape == (C, D_rgb), f"backgrounds must be [C, D]=[{C}, {D_rgb}], got {tuple(backgrounds.shape)}")
-        bgs = backgrounds.to(dtype)
-    if render_mode in ("RGB+D", "RGB+ED"):
-        cols = torch.cat([cols, proj.depths[..., None]], -1)
-        if bgs is not None:
-            bgs = torch.cat([bgs, bgs.new_zeros(C, 1)], -1)
-    elif render_mode in ("D", "ED"):
-        cols = proj.depths[..., None]
-        if bgs is not None:
-            bgs = bgs.new_zeros(C, 1)
-
+    per_camera = colors.dim() == (2 if sh_degree is None else 3) + 1
+    cols = colors if per_camera else colors[None].expand(C, *colors.shape)
+    campos = None
+    if sh_degree is not None:
+        campos = torch.linalg.inv(viewmats)[:, :3, 3][:, None, :]  # [C, 1, 3] camera centres (differentiable)
+    cols = _view_colors(cols, sh_degree, means[None], campos).to(means.dtype)
+    bgs = None if backgrounds is None else backgrounds.to(means.dtype)
+    cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
     render_colors, render_alphas = rasterize_to_pixels(
-        proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, int(width), int(height),
+        proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, width, height,
         tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule)
-    if bgs is not None:
-        render_colors = render_colors + (1.0 - render_alphas) * bgs[:, None, None, :]
-    if render_mode in ("ED", "RGB+ED"):
-        render_colors = torch.cat([render_colors[..., :-1],
-                                   render_colors[..., -1:] / render_alphas.clamp_min(1e-10)], -1)
-    TW, TH = -(-int(width) // tile_size), -(-int(height) // tile_size)
-    meta = dict(camera_ids=None, gaussian_ids=None, radii=proj.radii, means2d=proj.means2d, depths=proj.depths,
-                conics=proj.conics, opacities=opac, compensations=proj.compensations, tile_width=TW,
-                tile_height=TH, tile_size=tile_size, width=int(width), height=int(height), n_cameras=C,
-                render_mode=render_mode, camera_model=camera_model, rasterize_mode=rasterize_mode)
-    return render_colors, render_alphas, meta
+    meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=None,
+                 gaussian_ids=None, radii=proj.radii, means2d=proj.means2d, depths=proj.depths, conics=proj.conics,
+                 opacities=opac, compensations=proj.compensations)
+    return _finish(render_colors, render_alphas, bgs, render_mode), render_alphas, meta
 
 
 @dataclass
@@ -186,8 +280,14 @@ def render(
     far_plane: float = 1e10,
     rasterize_mode: str = "classic",
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
+    backend: str = "torch",
 ) -> RenderOutput:
-    """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1]."""
+    """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1].
+
+    backend: "torch" (the packed eager fast path), "compiled" (its torch.compile'd hot stages) or
+    "gsplat" (gsplat's CUDA kernels, optional extra). All three take the same arguments.
+    """
+    _check(backend in BACKENDS, f"backend must be one of {BACKENDS}, got {backend!r}")
     g = gaussians
     viewmats = _as_tensor(cam_from_world, g.means, "cam_from_world", (4, 4))
     Ks = _as_tensor(K, g.means, "K", (3, 3))
@@ -198,10 +298,14 @@ def render(
     if background is not None and render_mode not in ("D", "ED"):
         bgs = _as_tensor(background, g.means, "background", (3,)).expand(C, 3)
     deg = g.sh_degree if sh_degree is None else sh_degree
-    colors, alphas, _ = rasterization(
+    raster = rasterization
+    if backend == "gsplat":
+        from .gsplat_backend import gsplat_rasterization as raster
+    colors, alphas, _ = raster(
         g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
         near_plane=near_plane, far_plane=far_plane, sh_degree=deg, backgrounds=bgs, render_mode=render_mode,
-        rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems)
+        rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
+        compiled=backend == "compiled")
     rgb = depth = None
     if render_mode.startswith("RGB"):
         rgb = colors[..., :3].clamp(0.0, 1.0)

@@ -45,11 +45,16 @@ class Projected:
     opacities: torch.Tensor | None  # [C, N] opacities used for the radii (compensated if antialiased)
 
 
+def _intrinsics(Ks: torch.Tensor):
+    """fx, fy, cx, cy from `Ks [..., 3, 3]` already shaped to broadcast against the points' `[...]`
+    (`[C, 1, 3, 3]` for the dense `[C, N]` layout, `[M, 3, 3]` for packed camera-Gaussian pairs)."""
+    return Ks[..., 0, 0], Ks[..., 1, 1], Ks[..., 0, 2], Ks[..., 1, 2]
+
+
 def _pinhole_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int):
-    """means2d `[C,N,2]` and J `[C,N,2,3]`; x/z and y/z are clamped to 1.3x the frustum for J only."""
+    """means2d `[...,2]` and J `[...,2,3]`; x/z and y/z are clamped to 1.3x the frustum for J only."""
     x, y, z = mc.unbind(-1)
-    fx, fy = Ks[:, 0, 0, None], Ks[:, 1, 1, None]
-    cx, cy = Ks[:, 0, 2, None], Ks[:, 1, 2, None]
+    fx, fy, cx, cy = _intrinsics(Ks)
     tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
     lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
     lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
@@ -65,8 +70,7 @@ def _pinhole_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: in
 def _fisheye_jacobian(mc: torch.Tensor, Ks: torch.Tensor):
     """gsplat's equidistant fisheye (r = f * theta, no distortion coefficients) and its Jacobian."""
     x, y, z = mc.unbind(-1)
-    fx, fy = Ks[:, 0, 0, None], Ks[:, 1, 1, None]
-    cx, cy = Ks[:, 0, 2, None], Ks[:, 1, 2, None]
+    fx, fy, cx, cy = _intrinsics(Ks)
     eps = 1e-7
     xy_len = torch.sqrt(x * x + y * y) + eps
     theta = torch.atan2(xy_len, z + eps)
@@ -85,47 +89,32 @@ def _fisheye_jacobian(mc: torch.Tensor, Ks: torch.Tensor):
 
 def _ortho_jacobian(mc: torch.Tensor, Ks: torch.Tensor):
     x, y, _ = mc.unbind(-1)
-    fx, fy = Ks[:, 0, 0, None], Ks[:, 1, 1, None]
-    cx, cy = Ks[:, 0, 2, None], Ks[:, 1, 2, None]
+    fx, fy, cx, cy = _intrinsics(Ks)
     zero = torch.zeros_like(x)
     J = torch.stack([fx.expand_as(x), zero, zero, zero, fy.expand_as(x), zero], dim=-1)
     return torch.stack([fx * x + cx, fy * y + cy], dim=-1), J.reshape(mc.shape[:-1] + (2, 3))
 
 
-def project_gaussians(
-    means: torch.Tensor,  # [N, 3] world
-    covars: torch.Tensor,  # [N, 3, 3] world
-    viewmats: torch.Tensor,  # [C, 4, 4] cam_from_world
-    Ks: torch.Tensor,  # [C, 3, 3]
-    width: int,
-    height: int,
-    *,
-    eps2d: float = 0.3,
-    near_plane: float = 0.01,
-    far_plane: float = 1e10,
-    radius_clip: float = 0.0,
-    opacities: torch.Tensor | None = None,  # [N] or [C, N]: enables opacity-aware radii
-    calc_compensations: bool = False,
-    camera_model: str = "pinhole",
-) -> Projected:
-    """Project N Gaussians into C cameras; culled entries keep finite values and get radii 0."""
-    if camera_model not in CAMERA_MODELS:
-        raise ValueError(f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
-    R, t = viewmats[:, :3, :3], viewmats[:, :3, 3]  # [C,3,3], [C,3]
-    mc = torch.einsum("cij,nj->cni", R, means) + t[:, None, :]  # [C, N, 3] camera frame
-    z = mc[..., 2]
-    # Keep z away from 0 for the math of culled Gaussians, so no NaN leaks into gradients.
+def camera_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int, camera_model: str):
+    """Camera-frame points `mc [..., 3]` -> (means2d `[..., 2]`, J `[..., 2, 3]`); Ks broadcast as `_intrinsics`."""
     if camera_model == "pinhole":
+        # Keep z away from 0 for the math of culled Gaussians, so no NaN leaks into gradients.
+        z = mc[..., 2]
         safe_z = torch.where(z.abs() > 1e-6, z, torch.full_like(z, 1e-6))
-        mc_safe = torch.cat([mc[..., :2], safe_z[..., None]], dim=-1)
-        means2d, J = _pinhole_jacobian(mc_safe, Ks, width, height)
-    elif camera_model == "fisheye":
-        means2d, J = _fisheye_jacobian(mc, Ks)
-    else:
-        means2d, J = _ortho_jacobian(mc, Ks)
-    T = torch.einsum("cnak,cki->cnai", J, R)  # [C, N, 2, 3] = J W
-    cov2d = T @ covars[None] @ T.transpose(-1, -2)  # [C, N, 2, 2]
-    c00, c01, c11 = cov2d[..., 0, 0], 0.5 * (cov2d[..., 0, 1] + cov2d[..., 1, 0]), cov2d[..., 1, 1]
+        return _pinhole_jacobian(torch.cat([mc[..., :2], safe_z[..., None]], dim=-1), Ks, width, height)
+    if camera_model == "fisheye":
+        return _fisheye_jacobian(mc, Ks)
+    return _ortho_jacobian(mc, Ks)
+
+
+def screen_space(means2d, cov2d_entries, z, opacities, width: int, height: int, *, eps2d: float,
+                 near_plane: float, far_plane: float, radius_clip: float, calc_compensations: bool) -> Projected:
+    """Blur, invert and bound 2D covariances (c00, c01, c11 each `[...]`) into a `Projected`.
+
+    Shared by the dense reference (`[C, N]`) and the packed fast path (`[M]` pairs) so both cull
+    and bound exactly alike. opacities `[...]` or None (then no opacity-aware radii).
+    """
+    c00, c01, c11 = cov2d_entries
     det_orig = c00 * c11 - c01 * c01
     c00, c11 = c00 + eps2d, c11 + eps2d
     det = c00 * c11 - c01 * c01
@@ -155,3 +144,33 @@ def project_gaussians(
         valid &= torch.isfinite(m2).all(-1)
         radii = torch.stack([rx, ry], dim=-1).where(valid[..., None], torch.zeros_like(m2)).to(torch.int32)
     return Projected(means2d, conics, z, radii, compensations, op_used)
+
+
+def project_gaussians(
+    means: torch.Tensor,  # [N, 3] world
+    covars: torch.Tensor,  # [N, 3, 3] world
+    viewmats: torch.Tensor,  # [C, 4, 4] cam_from_world
+    Ks: torch.Tensor,  # [C, 3, 3]
+    width: int,
+    height: int,
+    *,
+    eps2d: float = 0.3,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    radius_clip: float = 0.0,
+    opacities: torch.Tensor | None = None,  # [N] or [C, N]: enables opacity-aware radii
+    calc_compensations: bool = False,
+    camera_model: str = "pinhole",
+) -> Projected:
+    """Project N Gaussians into C cameras; culled entries keep finite values and get radii 0."""
+    if camera_model not in CAMERA_MODELS:
+        raise ValueError(f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
+    R, t = viewmats[:, :3, :3], viewmats[:, :3, 3]  # [C,3,3], [C,3]
+    mc = torch.einsum("cij,nj->cni", R, means) + t[:, None, :]  # [C, N, 3] camera frame
+    means2d, J = camera_jacobian(mc, Ks[:, None], width, height, camera_model)
+    T = torch.einsum("cnak,cki->cnai", J, R)  # [C, N, 2, 3] = J W
+    cov2d = T @ covars[None] @ T.transpose(-1, -2)  # [C, N, 2, 2]
+    c01 = 0.5 * (cov2d[..., 0, 1] + cov2d[..., 1, 0])
+    return screen_space(means2d, (cov2d[..., 0, 0], c01, cov2d[..., 1, 1]), mc[..., 2], opacities, width, height,
+                        eps2d=eps2d, near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
+                        calc_compensations=calc_compensations)
