@@ -219,7 +219,7 @@ def run(cfg: DictConfig) -> dict:
     if not cfg.algo.ppo.enabled and not bc_on and state is None:
         save_checkpoint(ckpt.last, policy=policy, optimizer=None, counters={}, config=config_dict, phase="done")
 
-    table = comparison_table({r: results[r]["summary"]["overall"] for r in rows}, baseline=first)
+    table = comparison_table({r: results[r]["records"] for r in rows}, baseline=first)
     header = (f"{cfg.exp_name} | scene {scene.name} | eval split {cfg.eval.split} | seed {seed} | "
               f"{time.perf_counter() - t_start:.0f}s")
     atomic_write_text(run_dir / "table.txt", header + "\n" + table + "\n")

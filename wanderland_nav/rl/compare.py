@@ -1,8 +1,8 @@
 """Evaluate several trained checkpoints side by side (the paper's Table 3 layout).
 
 Each checkpoint is evaluated in the env it was trained in (its stored `env` / `render` config, shaped to
-its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the relative
-change column.
+its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the paired
+differences (with 95 % intervals) below the table.
 """
 
 from __future__ import annotations
@@ -46,5 +46,5 @@ def compare_checkpoints(paths, scene, episodes_path, *, split: str | None, num_e
         res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)
         env.close()
         rows[label], results[label] = res.summary["overall"], res
-    table = comparison_table(rows, baseline=next(iter(rows)))
+    table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table
