@@ -61,27 +61,18 @@ def resolve_scene(cfg: DictConfig):
         if not path.is_dir():
             raise FileNotFoundError(f"scene.path={path}: no such scene folder")
         scene = load_scene(path, up_axis=sc.get("up_axis"))
-    episodes = Path(scene.root) / "episodes.json"
     if cfg.episodes.get("path"):
         episodes = Path(cfg.episodes.path)
         if not episodes.is_file():
             raise FileNotFoundError(f"episodes.path={episodes}: no such file")
-    elif scene.episodes_path is not None and Path(scene.episodes_path).is_file():
-        episodes = Path(scene.episodes_path)
-    elif not episodes.is_file():
-        from planners import NavMesh
-        from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+    else:
+        from wanderland_nav.rl.episode_set import episodes_for_run
 
-        if scene.navmesh_path is None:
-            raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
-                                    f"(python -m wanderland_nav.prepare scene={scene.root})")
-        t = time.perf_counter()
-        # point-goal training needs no goal views; rendering them costs seconds each on a CPU
-        settings = GeneratorSettings(goal_images=bool(cfg.episodes.goal_images))
-        write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), episodes, num_episodes=int(cfg.episodes.num),
-                             seed=int(cfg.episodes.seed), settings=settings)
-        log.info("generated %d episodes -> %s (%.1fs)", int(cfg.episodes.num), episodes, time.perf_counter() - t)
-        scene = load_scene(scene.root, up_axis=sc.get("up_axis"))
+        own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
+        num = cfg.episodes.num
+        episodes = episodes_for_run(scene, Path(own), num=None if num is None else int(num), seed=int(cfg.episodes.seed),
+                                    splits=tuple(cfg.episodes.get("splits") or (0.8, 0.1, 0.1)),
+                                    goal_images=bool(cfg.episodes.goal_images))
     return scene, episodes
 
 
