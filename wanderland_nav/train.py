@@ -36,7 +36,8 @@ from wanderland_nav.rl.checkpoint import Checkpointer, load_policy_weights, save
 from wanderland_nav.rl.loggers import make_logger
 from wanderland_nav.rl.policy_env import PolicyActor, lod_gaussians, shaped_env_config
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
-from wanderland_nav.rl.report import comparison_table
+from wanderland_nav.rl.curves import write_learning_curves
+from wanderland_nav.rl.report import comparison_table, row_estimates
 
 log = logging.getLogger("wanderland_nav.train")
 
@@ -70,7 +71,8 @@ def resolve_scene(cfg: DictConfig):
 
         own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
         num = cfg.episodes.num
-        episodes = episodes_for_run(scene, Path(own), num=None if num is None else int(num), seed=int(cfg.episodes.seed),
+        episodes = episodes_for_run(scene, Path(own), num=None if num is None else int(num),
+                                    seed=int(cfg.episodes.seed),
                                     splits=tuple(cfg.episodes.get("splits") or (0.8, 0.1, 0.1)),
                                     goal_images=bool(cfg.episodes.goal_images))
     return scene, episodes
@@ -110,7 +112,8 @@ def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Pat
     else:
         res = run_evaluation(eval_env, actor, cfg.eval.episodes, seed=int(cfg.seed), name=name,
                              progress=bool(cfg.progress))
-    results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t}
+    results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
+                     "frames": step}
     atomic_write_json(results_path, results)
     o = res.summary["overall"]
     logger.log_scalars({f"eval/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)
@@ -120,7 +123,7 @@ def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Pat
 
 def run(cfg: DictConfig) -> dict:
     """Everything `main` does, callable with a composed config (tests). Returns `results` (name -> eval)."""
-    from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.rl.route_goal import make_env
 
     t_start = time.perf_counter()
     torch.manual_seed(int(cfg.seed))
@@ -141,9 +144,11 @@ def run(cfg: DictConfig) -> dict:
                                 tuple(render_size) if render_size else None)
     seed, device = int(cfg.seed), str(cfg.device)
     gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)
-    eval_env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,
+    goal_kw = dict(goal_input=str(cfg.get("goal_input") or "goal"),
+                   lookahead=float(cfg.get("route_lookahead") or 3.0))
+    eval_env = make_env(scene, **goal_kw, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,
                             episodes_path=episodes_path, split=cfg.eval.split, seed=seed, gaussians=gaussians)
-    env_fn = partial(make_nav_env, str(scene.root), config=env_cfg, batch_size=int(cfg.train_env.batch_size),
+    env_fn = partial(make_env, str(scene.root), **goal_kw, config=env_cfg, batch_size=int(cfg.train_env.batch_size),
                      device=device, episodes_path=episodes_path, split=cfg.train_env.split, seed=seed,
                      gaussians=gaussians)
 
@@ -211,9 +216,12 @@ def run(cfg: DictConfig) -> dict:
         save_checkpoint(ckpt.last, policy=policy, optimizer=None, counters={}, config=config_dict, phase="done")
 
     table = comparison_table({r: results[r]["records"] for r in rows}, baseline=first)
-    header = (f"{cfg.exp_name} | scene {scene.name} | eval split {cfg.eval.split} | seed {seed} | "
+    header = (f"{cfg.exp_name} | scene {scene.name} | eval split {cfg.eval.split} | goal input {goal_kw['goal_input']}"
+              f"{' %g m ahead' % goal_kw['lookahead'] if goal_kw['goal_input'] == 'route' else ''} | seed {seed} | "
               f"{time.perf_counter() - t_start:.0f}s")
     atomic_write_text(run_dir / "table.txt", header + "\n" + table + "\n")
+    write_learning_curves(run_dir, {r: (results[r].get("frames", 0), row_estimates(results[r]["records"]))
+                                    for r in rows})
     print(header)
     print(table, flush=True)
     logger.close()

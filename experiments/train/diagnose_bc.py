@@ -37,6 +37,7 @@ from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.pipeline import ensure_demo_scene
 from wanderland_nav.rl.bc import ExpertActor, ExpertPaths, collect
 from wanderland_nav.rl.policy_env import PolicyActor, lod_gaussians, shaped_env_config
+from wanderland_nav.rl.route_goal import RouteGoal
 
 ROOT = Path(__file__).resolve().parents[2]
 TERMINATION = {"max_steps": 100, "no_progress_steps": 30, "stuck_steps": 10}  # conf/train.yaml's demo env
@@ -57,19 +58,15 @@ class GoalStraight(torch.nn.Module):
         return td
 
 
-class RouteGoal(torch.nn.Module):
-    """Overwrites `GOAL_VECTOR` with the expert route's point `lookahead` m ahead, then runs `inner` (if any)."""
+class WithRouteGoal(torch.nn.Module):
+    """The library's `RouteGoal` transform applied to the observation before `inner` acts (evaluation only)."""
 
-    def __init__(self, paths: ExpertPaths, lookahead: float, inner=None):
+    def __init__(self, paths: ExpertPaths, lookahead: float, inner):
         super().__init__()
-        self.paths, self.lookahead, self.inner = paths, lookahead, inner
+        self.route, self.inner = RouteGoal(paths, lookahead), inner
 
     def forward(self, td):
-        n = td.batch_size.numel()
-        sub = self.paths.waypoints(td.get(K.AGENT_POSITION).reshape(n, 3), td.get(K.AGENT_YAW).reshape(n),
-                                   td.get(K.EPISODE_INDEX).reshape(n), 1, self.lookahead)[:, 0]
-        td.set(K.GOAL_VECTOR, sub.view(*td.batch_size, 2))
-        return td if self.inner is None else self.inner(td)
+        return self.inner(self.route._call(td))
 
 
 def bearing_deg(xy: torch.Tensor) -> torch.Tensor:
@@ -79,9 +76,9 @@ def bearing_deg(xy: torch.Tensor) -> torch.Tensor:
 def env_pair(policy, scene, episodes, threads_seed: int):
     cfg = shaped_env_config({"termination": TERMINATION}, policy)
     g = lod_gaussians(scene.gaussians_path, 10_000)
-    mk = lambda split, b: make_nav_env(scene, config=cfg, batch_size=b, episodes_path=episodes, split=split,  # noqa: E731
-                                       seed=threads_seed, gaussians=g)
-    return mk("train", 8), mk("test", 10)
+    kw = dict(config=cfg, episodes_path=episodes, seed=threads_seed, gaussians=g)
+    return (make_nav_env(scene, batch_size=8, split="train", **kw),
+            make_nav_env(scene, batch_size=10, split="test", **kw))
 
 
 def fit(policy, data: TensorDict, labels: torch.Tensor, updates: int, seed: int, lr: float = 3e-4):
@@ -155,7 +152,7 @@ def main():
 
     held = data.get(K.EPISODE_INDEX).view(-1) % 5 == 0                    # 1 in 5 training episodes held out
     tr, te = data[~held], data[held]
-    route = RouteGoal(paths, a.lookahead)
+    route = RouteGoal(paths, a.lookahead)._call
     variants = {"images": lambda td: td, "blind": lambda td: td.set(K.RGB, torch.zeros_like(td.get(K.RGB))),
                 "route": route}
     fits = {}
@@ -175,7 +172,7 @@ def main():
     o = run_evaluation(test_env, PolicyActor(fits["images"]), seed=a.seed, name="bc").summary["overall"]
     print(f"[5] image fit on the test split: SR {o['SR']:.2f} SPL {o['SPL']:.2f} NE {o['NE']:.2f} "
           f"({o['episodes']} episodes)")
-    oracle = RouteGoal(test_paths, a.lookahead, PolicyActor(fits["route"]))
+    oracle = WithRouteGoal(test_paths, a.lookahead, PolicyActor(fits["route"]))
     o = run_evaluation(test_env, oracle, seed=a.seed, name="route").summary["overall"]
     print(f"[6] route-goal fit ({a.lookahead:g} m lookahead) on the test split: SR {o['SR']:.2f} SPL {o['SPL']:.2f} "
           f"NE {o['NE']:.2f} ({o['episodes']} episodes) | total {time.perf_counter() - t0:.0f}s")

@@ -26,7 +26,7 @@ def compare_checkpoints(paths, scene, episodes_path, *, split: str | None, num_e
                         batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table)."""
     from wanderland_nav.envs.evaluation import run_evaluation
-    from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.rl.route_goal import make_env
 
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")
@@ -38,8 +38,10 @@ def compare_checkpoints(paths, scene, episodes_path, *, split: str | None, num_e
         size = render.get("image_size")
         env_cfg = shaped_env_config(conf.get("env"), policy, tuple(size) if size else None)
         g = lod_gaussians(scene.gaussians_path, render.get("max_gaussians"))
-        env = make_nav_env(scene, config=env_cfg, batch_size=batch_size, device=device, episodes_path=episodes_path,
-                           split=split, seed=seed, gaussians=g)
+        goal_kw = dict(goal_input=str(conf.get("goal_input") or "goal"),
+                       lookahead=float(conf.get("route_lookahead") or 3.0))  # as trained
+        env = make_env(scene, **goal_kw, config=env_cfg, batch_size=batch_size, device=device,
+                       episodes_path=episodes_path, split=split, seed=seed, gaussians=g)
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)

@@ -64,6 +64,11 @@ def estimate(runs: Sequence[Sequence[Mapping]], column: str) -> Estimate:
     return rate_interval(x) if column in RATES else bootstrap_interval(x)
 
 
+def row_estimates(records: Sequence[Mapping], columns: Sequence[str] = TABLE_COLUMNS) -> dict[str, Estimate]:
+    """One evaluation's records -> column -> mean with its 95 % interval."""
+    return {c: estimate([records], c) for c in columns}
+
+
 def _cell(e: Estimate, column: str) -> str:
     f = "{:.2f}" if column not in RATES and column != "SPL" else "{:.3f}"
     return f"{f.format(e.value)} [{f.format(e.low)}, {f.format(e.high)}]"
@@ -80,7 +85,8 @@ def _delta_cell(d: Estimate, base: float, column: str) -> str:
 
 def _layout(head: list[str], body: list[list[str]]) -> list[str]:
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    fmt = lambda row: "  ".join(x.ljust(w) if i == 0 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))  # noqa: E731
+    def fmt(row):
+        return "  ".join(x.ljust(w) if i == 0 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))
     return [fmt(head), *(fmt(r) for r in body)]
 
 
