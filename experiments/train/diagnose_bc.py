@@ -117,6 +117,7 @@ def main():
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--detour-deg", type=float, default=30.0)
+    ap.add_argument("--skip-baselines", action="store_true", help="skip (1-2), the two non-learned evaluations")
     ap.add_argument("--lookahead", type=float, default=3.0, help="metres ahead on the route for the oracle (6)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
@@ -131,7 +132,8 @@ def main():
     k, sp = policy.num_waypoints, float(policy.waypoint_spacing)
 
     test_paths = ExpertPaths.from_episodes(test_env.episodes, scene.nav_from_scene)
-    for label, actor in (("expert (no noise)", ExpertActor(test_paths, k, sp)), ("goal-straight", GoalStraight(k, sp))):
+    baselines = (("expert (no noise)", ExpertActor(test_paths, k, sp)), ("goal-straight", GoalStraight(k, sp)))
+    for label, actor in baselines[:0] if a.skip_baselines else baselines:
         o = run_evaluation(test_env, actor, seed=a.seed, name=label).summary["overall"]
         print(f"[1-2] {label:18s} test SR {o['SR']:.2f} SPL {o['SPL']:.2f} NE {o['NE']:.2f} ({o['episodes']} episodes)")
 
