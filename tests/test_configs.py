@@ -7,6 +7,7 @@ fit in the test budget.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -143,7 +144,10 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
         assert ck["phase"] == "ppo_done" and ck["counters"] == {"ppo_iteration": 2, "ppo_frames": 16}
     else:
         assert ck["phase"] == "bc_done"
-    assert (tmp_path / "run" / "table.txt").read_text().count("\n") == 3 + len(rows)  # title, header, rows, legend
+    table = (tmp_path / "run" / "table.txt").read_text()
+    assert table.count("\n") == 3 + 2 * len(rows)  # title, header, rows, paired-difference rows, 2 legend lines
+    assert re.search(r"^BC - untrained +paired", table, re.M) and "[95% interval] over 2 episodes" in table
+    assert (tmp_path / "run" / "curves.png").read_bytes()[:4] == b"\x89PNG"
     # a second start finds everything done: no retraining, same table
     assert run(cfg) == rows
 

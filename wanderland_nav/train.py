@@ -23,7 +23,8 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import comparison_table
+from wanderland_nav.viz.curves import write_learning_curves
+from wanderland_nav.rl.report import comparison_table, row_estimates
 
 
 def run(cfg: DictConfig) -> dict:
@@ -43,10 +44,13 @@ def run(cfg: DictConfig) -> dict:
     recipe, scene = training_recipe(c, config, evaluate)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
-    table = comparison_table({r: results[r]["summary"]["overall"] for r in rows}, baseline=rows[0])
-    header = (f"{c.exp_name} | scene {scene.name} | eval split {c.eval.split} | seed {c.seed} | "
+    table = comparison_table({r: results[r]["records"] for r in rows}, baseline=rows[0])
+    goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
+    header = (f"{c.exp_name} | scene {scene.name} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
               f"run {recipe.identity['hash'][:8]} | {time.perf_counter() - t_start:.0f}s")
     atomic_write_text(recipe.run_dir / "table.txt", header + "\n" + table + "\n")
+    write_learning_curves(recipe.run_dir, {r: (results[r].get("frames", 0), row_estimates(results[r]["records"]))
+                                           for r in rows})
     print(header)
     print(table, flush=True)
     recipe.logger.close()

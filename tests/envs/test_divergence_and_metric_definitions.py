@@ -108,11 +108,14 @@ def test_ne_is_euclidean_distance_to_goal_is_geodesic_and_spl_lengths_are_horizo
 def test_report_table_has_both_distances():
     from wanderland_nav.rl.report import comparison_table
 
-    rows = {"BC": {"episodes": 2, "NE": 1.0, "distance_to_goal": 3.0, "SR": 0.5, "SPL": 0.4, "IR": 0.0},
-            "BC+RL": {"episodes": 2, "NE": 0.5, "distance_to_goal": 1.5, "SR": 0.5, "SPL": 0.4, "IR": 0.0}}
-    lines = comparison_table(rows, "BC").splitlines()
-    assert lines[0].split() == ["policy", "episodes", "NE", "distance_to_goal", "SR", "SPL", "IR"]
-    assert lines[2].split()[2:6] == ["0.50", "(+50%)", "1.50", "(+50%)"]  # both in metres, lower is better
+    def recs(ne, dtg):  # two episodes: Euclidean NE and geodesic distance_to_goal per episode
+        return [{"episode_id": i, "navigation_error": ne + i, "distance_to_goal": dtg + i, "success": i == 0,
+                 "spl": 0.4, "intervention": False} for i in range(2)]
+
+    lines = comparison_table({"BC": recs(1.0, 3.0), "BC+RL": recs(0.5, 1.5)}, "BC").splitlines()
+    assert lines[0].split() == ["policy", "N", "NE", "distance_to_goal", "SR", "SPL", "IR"]
+    delta = next(x for x in lines if x.startswith("BC+RL - BC")).split()
+    assert delta[4:8] == ["-0.50", "[-0.50,", "-0.50]", "(+33%)"] and delta[8:12] == ["-1.50", "[-1.50,", "-1.50]", "(+43%)"]
 
 
 def test_goal_off_the_mesh_is_named():

@@ -67,7 +67,9 @@ def test_bc_in_fake_env_beats_untrained():
     stats = train_bc(p, env, paths, BCConfig(rounds=2, env_steps_per_round=12, updates_per_round=80, lr=1e-3),
                      progress=False)
     after = _success_rate(env, act)
-    assert stats["bc/dataset"] == 2 * 12 * 8
+    assert stats["bc/dataset"] + stats["bc/heldout_samples"] == 2 * 12 * 8   # 1 episode in 10 held out
+    assert 0 < stats["bc/heldout_samples"] < 2 * 12 * 8 and 0 <= stats["bc/heldout_l1"] < 0.5
+    assert stats["bc/lr"] == pytest.approx(1e-4)                              # cosine decay ends at lr / 10
     assert after >= 0.9 and after > before + 0.3, (before, after)
 
 

@@ -61,15 +61,29 @@ def test_csv_logger_writes_and_resumes(tmp_path, caplog):
         make_logger(LoggerGroup(kind="wandb"), tmp_path)
 
 
-def test_relative_change_signs():
+def _records(ne, success):
+    return [{"episode_id": i, "navigation_error": n, "distance_to_goal": n, "success": s, "spl": 0.9 * s,
+             "intervention": not s}
+            for i, (n, s) in enumerate(zip(ne, success))]
+
+
+def test_relative_change_signs_and_interval_table():
     assert relative_change(0.6, 0.4, "SR") == pytest.approx(0.5)
     assert relative_change(2.0, 4.0, "NE") == pytest.approx(0.5)     # lower NE is better
     assert math.isnan(relative_change(0.3, 0.0, "SR"))
-    table = comparison_table({"untrained": {"episodes": 4, "NE": 4.0, "SR": 0.25, "SPL": 0.2, "IR": 0.5},
-                              "BC": {"episodes": 4, "NE": 2.0, "SR": 0.5, "SPL": 0.4, "IR": 0.25}}, "untrained")
+    ne = [float(x) for x in range(1, 41)]
+    base = _records(ne, [i % 4 == 0 for i in range(40)])
+    better = _records([x - 1.0 for x in ne], [i % 2 == 0 for i in range(40)])     # NE -1 m on every episode
+    noisy = _records([x + (1.0 if i % 2 else -1.0) for i, x in enumerate(ne)], [i % 4 == 0 for i in range(40)])
+    table = comparison_table({"untrained": base, "BC": better, "RL": noisy}, "untrained")
     lines = table.splitlines()
-    assert lines[0].split() == ["policy", "episodes", "NE", "distance_to_goal", "SR", "SPL", "IR"]
-    assert "(+50%)" in lines[2] and "(+100%)" in lines[2]
-    assert lines[-1].startswith("(+x%): change vs untrained") and "NE/distance_to_goal/IR lower is better" in lines[-1]
+    assert lines[0].split() == ["policy", "N", "NE", "distance_to_goal", "SR", "SPL", "IR"]
+    assert lines[1].split()[:3] == ["untrained", "40", "20.50"]
+    assert "0.250 [0.142, 0.402]" in lines[1]                                        # Wilson 10 / 40
+    bc_delta = next(x for x in lines if x.startswith("BC - untrained"))
+    assert "-1.00 [-1.00, -1.00] (+5%)" in bc_delta and "+0.250" in bc_delta      # NE 20.5 -> 19.5 is 5 % better
+    rl_delta = next(x for x in lines if x.startswith("RL - untrained"))
+    assert "%" not in rl_delta                     # +-1 m noise: interval spans 0, no percentage
+    assert "paired difference" in lines[-1] and "NE/distance_to_goal/IR lower is better" in lines[-1]
     with pytest.raises(KeyError, match="nope"):
-        comparison_table({"a": {}}, "nope")
+        comparison_table({"a": base}, "nope")

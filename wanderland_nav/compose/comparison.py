@@ -1,8 +1,8 @@
 """Evaluate several trained checkpoints side by side (the paper's Table 3 layout).
 
 Each checkpoint is evaluated in the env it was trained in (its stored `env` / `render` config, shaped to
-its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the relative
-change column.
+its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the paired
+differences (with 95 % intervals) below the table.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, sc
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
 from wanderland_nav.rl.report import comparison_table
+from wanderland_nav.rl.route_goal import GoalInputEnvFn
 
 
 def checkpoint_label(path: Path) -> str:
@@ -46,13 +47,15 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         render = conf.get("render") or {}
         env_cfg = shaped_env_config(stored_env_config(conf, path), policy, render.get("image_size"))
         g = scene_gaussians(scene, render.get("max_gaussians"), needed=env_cfg.camera.enabled)
-        env = env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size, seed=seed, device=device,
-                          navmesh=navmesh, gaussians=g)()
+        goal_kw = dict(goal_input=str(conf.get("goal_input") or "goal"),
+                       lookahead=float(conf.get("route_lookahead") or 3.0))  # as the checkpoint was trained
+        env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size, seed=seed,
+                                         device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)
         res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)
         env.close()
         rows[label], results[label] = res.summary["overall"], res
-    table = comparison_table(rows, baseline=next(iter(rows)))
+    table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table

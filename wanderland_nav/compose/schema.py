@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -86,7 +86,8 @@ class CollectorGroup:
 @dataclass
 class EpisodeSource:
     path: Optional[str] = None  # an episodes.json instead of <scene>/episodes.json
-    num: int = 100  # generated when the scene has none
+    num: Optional[int] = 400  # null: the scene's own file as it is; else a sibling file with this many (compose/episode_file.py)
+    splits: Tuple[float, float, float] = (0.6, 0.15, 0.25)  # train / val / test fractions
     seed: int = 0
     goal_images: bool = False
 
@@ -129,6 +130,8 @@ class TrainConfig:
     run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
     init_checkpoint: Optional[str] = None
     demo_preset: str = "tiny"
+    goal_input: str = "route"  # route | goal (rl/route_goal.py)
+    route_lookahead: float = 3.0
     save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
     episodes: EpisodeSource = field(default_factory=EpisodeSource)
     render: RenderSettings = field(default_factory=RenderSettings)

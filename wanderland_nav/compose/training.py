@@ -11,10 +11,12 @@ import torch
 from wanderland_nav.compose.build import (env_factory, load_navmesh, make_logger, make_policy_from_config,
                                           scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
+from wanderland_nav.compose.episode_file import episodes_for_run
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.rl.recipe import Recipe
+from wanderland_nav.rl.route_goal import GoalInputEnvFn
 
 log = logging.getLogger("wanderland_nav.train")
 
@@ -45,8 +47,14 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     if c.threads:
         torch.set_num_threads(c.threads)
     scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
-    scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
-                                          generator=GeneratorSettings(goal_images=c.episodes.goal_images))
+    if c.episodes.path is not None:
+        scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
+                                              generator=GeneratorSettings(goal_images=c.episodes.goal_images))
+    else:  # episodes.num is honoured: the scene's file when it matches, else a generated sibling file
+        own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
+        episodes_path = episodes_for_run(scene, Path(own), num=c.episodes.num, seed=c.episodes.seed,
+                                         splits=tuple(c.episodes.splits), goal_images=c.episodes.goal_images)
+        scene.episodes_path = episodes_path
     identity = run_identity(config, scene_identity(scene.root, episodes_path))
     run_dir = checked_run_dir(c, identity)
     policy = make_policy_from_config(c.policy, c.device)
@@ -54,9 +62,11 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
                  gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
-    eval_env = env_factory(scene, episodes_path, env_cfg, split=c.eval.split, batch_size=c.eval.batch_size, **parts)()
-    env_fn = env_factory(scene, episodes_path, env_cfg, split=c.train_env.split, batch_size=c.train_env.batch_size,
-                         **parts)
+    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
+    eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
+                                          batch_size=c.eval.batch_size, **parts), **goal)()
+    env_fn = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.train_env.split,
+                                        batch_size=c.train_env.batch_size, **parts), **goal)
     logger = make_logger(c.logger, run_dir, scene)
     first = "untrained"
     if c.init_checkpoint:

@@ -17,14 +17,14 @@ from pathlib import Path
 import torch
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table
+from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics
 
 
 @dataclass
 class EvaluationResult:
     records: list[dict]  # one per episode (EpisodeMetrics.to_dict()), by start serial
     summary: dict[str, dict[str, float]]  # aggregate_metrics(...)
-    table: str  # printable NE / SR / SPL / IR table
+    table: str  # printable NE / SR / SPL / IR table: episodes and 95 % intervals, one row per group
 
 
 @torch.no_grad()
@@ -71,9 +71,20 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
         if bar is not None:
             bar.close()
     metrics = [got[i] for i in range(n)]
-    summary = aggregate_metrics(metrics)
-    table = format_table({f"{name}/{g}": r for g, r in summary.items()})
-    return EvaluationResult([m.to_dict() for m in metrics], summary, table)
+    records = [m.to_dict() for m in metrics]
+    return EvaluationResult(records, aggregate_metrics(metrics), interval_table(records, name))
+
+
+def interval_table(records: list[dict], name: str) -> str:
+    """NE / SR / SPL / IR with 95 % intervals for all episodes and for each indoor / outdoor group present."""
+    from wanderland_nav.rl.report import comparison_table
+
+    rows = {f"{name}/overall": records}
+    for group in ("indoor", "outdoor"):
+        sub = [r for r in records if r.get("environment") == group]
+        if sub:
+            rows[f"{name}/{group}"] = sub
+    return comparison_table(rows)
 
 
 class PolicyActor(torch.nn.Module):

@@ -16,6 +16,7 @@ aggregate dataset is fitted with minibatch Adam.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -116,6 +117,8 @@ class BCConfig:
     expert_noise: float = 0.3      # metres of waypoint noise in the expert round
     dagger_beta: float = 0.5       # expert share in DAgger rounds (decays by half each round)
     max_grad_norm: float = 1.0
+    heldout_every: int = 10        # episodes with index % this == 0 are held out: their loss is reported, not fitted
+    cosine_lr: bool = True         # cosine decay of lr to lr / 10 over all rounds' updates (fits to convergence)
 
     def __post_init__(self):
         if self.rounds < 1 or self.env_steps_per_round < 1 or self.updates_per_round < 0 or self.batch_size < 1:
@@ -134,16 +137,31 @@ def collect(env: EnvBase, actor: TensorDictModuleBase, steps: int, keys: list[st
     return roll.select(*present).reshape(-1).clone()
 
 
+@torch.no_grad()
+def heldout_l1(policy: NavPolicy, data: TensorDict, chunk: int = 256) -> torch.Tensor:
+    """Mean |prediction - label| (metres) per waypoint horizon `[K]` on `data` (with its private `_label`)."""
+    was = policy.training
+    policy.eval()
+    err = torch.cat([(policy(data[i:i + chunk].exclude("_label")).get(K.WAYPOINTS) - data[i:i + chunk].get("_label"))
+                     .abs().mean(-1) for i in range(0, data.shape[0], chunk)])
+    policy.train(was)
+    return err.mean(0)
+
+
 def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig, *, logger: Logger | None = None,
              seed: int = 0, progress: bool = True, step_offset: int = 0) -> dict[str, float]:
-    """DAgger-style behaviour cloning in `env`; returns the last round's mean losses."""
+    """DAgger-style behaviour cloning in `env`; returns the last round's mean losses and held-out L1."""
     g = torch.Generator().manual_seed(seed)
     spacing = float(policy.waypoint_spacing)
     expert = ExpertActor(paths, policy.num_waypoints, spacing, cfg.expert_noise, generator=g)
     labeler = ExpertActor(paths, policy.num_waypoints, spacing)
     keys = _store_keys(policy)
     opt = torch.optim.AdamW(policy.trainable_parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    total = max(cfg.rounds * cfg.updates_per_round, 1)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda u: 0.1 + 0.45 * (1 + math.cos(math.pi * min(u, total) / total)) if cfg.cosine_lr else 1.0)
     data: TensorDict | None = None
+    held: TensorDict | None = None
     stats: dict[str, float] = {}
     pbar = tqdm(total=cfg.rounds * cfg.updates_per_round, desc="BC", disable=not progress, dynamic_ncols=True)
     env.set_seed(seed)
@@ -153,6 +171,10 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
         actor = expert if r == 0 else _MixedActor(labeler, policy, cfg.dagger_beta * 0.5 ** (r - 1), g)
         new = collect(env, actor, cfg.env_steps_per_round, keys)
         new.set("_label", labeler.labels(new))   # private, never leaves this function
+        out = (new.get(K.EPISODE_INDEX).view(-1) % cfg.heldout_every == 0) if cfg.heldout_every > 0 else None
+        if out is not None and out.any():
+            held = new[out] if held is None else torch.cat([held, new[out]], 0)
+            new = new[~out]
         data = new if data is None else torch.cat([data, new], 0)
         policy.train()
         sums: dict[str, float] = {}
@@ -167,6 +189,7 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
             loss.backward()
             torch.nn.utils.clip_grad_norm_(policy.trainable_parameters(), cfg.max_grad_norm)
             opt.step()
+            sched.step()
             metrics = {"bc/loss": float(loss.detach()), **{f"bc/{k}": v for k, v in metrics.items()}}
             for k, v in metrics.items():
                 sums[k] = sums.get(k, 0.0) + v
@@ -175,6 +198,14 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
             pbar.set_postfix(loss=f"{metrics['bc/loss']:.3f}", round=r)
         stats = {k: v / max(cfg.updates_per_round, 1) for k, v in sums.items()}
         stats["bc/dataset"] = data.shape[0]
+        stats["bc/lr"] = opt.param_groups[0]["lr"]
+        if held is not None:  # states of the same rounds in episodes never fitted: generalisation, not memory
+            per_k = heldout_l1(policy, held)
+            stats.update({"bc/heldout_l1": float(per_k.mean()), "bc/heldout_l1_first": float(per_k[0]),
+                          "bc/heldout_l1_last": float(per_k[-1]), "bc/heldout_samples": held.shape[0]})
+            log.info("BC round %d: %d samples, train L1 %.3f m, held-out L1 %.3f m (per waypoint %s)", r, data.shape[0],
+                     stats.get("bc/waypoint_l1", float("nan")), float(per_k.mean()),
+                     [round(float(x), 3) for x in per_k])
         if logger is not None:
             logger.log_scalars(stats, step)
     pbar.close()

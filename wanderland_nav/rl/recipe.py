@@ -66,7 +66,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         t = time.perf_counter()
         res = r.evaluate(name, r.policy, r.eval_env, step)
         results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
-                         "identity": r.identity["hash"]}
+                         "identity": r.identity["hash"], "frames": step}
         atomic_write_json(results_path, results)
         o = res.summary["overall"]
         r.logger.log_scalars({f"eval/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)

@@ -1,15 +1,37 @@
-"""Before/after tables like the paper's Table 3: one row per policy state, relative change vs a baseline."""
+"""Before/after tables like the paper's Table 3, with the sample size and 95 % intervals on every number.
+
+Input is per-episode records (`EpisodeMetrics.to_dict()`), never pre-averaged summaries, so each
+number carries its uncertainty: SR with a Wilson interval, NE / SPL / IR with a bootstrap over episodes.
+A change vs the baseline row is the paired difference over the same episodes with its own interval;
+its relative size in % is printed only where that interval excludes zero (otherwise the change is
+not distinguishable from noise and a percentage would overstate it).
+
+`seed_table` does the same for several training seeds evaluated on the same episodes (`-m seed=0,1,2`):
+mean over seeds x episodes with a two-level bootstrap, and the IQM where asked.
+CLI: `python -m wanderland_nav.rl.report multirun/citywalker_rl/*/results.json` (one `results.json` per seed).
+"""
 
 from __future__ import annotations
 
+import json
 import math
+import sys
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import torch
+
+from wanderland_nav.stats import Estimate, bootstrap_interval, paired_difference, rate_interval, seed_aggregate
 
 #: NE = Euclidean end-to-goal distance (the paper's), distance_to_goal = geodesic end-to-goal distance,
 #: SPL with horizontal lengths; definitions in `wanderland_nav.envs.metrics`
 TABLE_COLUMNS = ("NE", "distance_to_goal", "SR", "SPL", "IR")
+#: table column -> EpisodeMetrics field
+FIELDS = {"NE": "navigation_error", "SR": "success", "SPL": "spl", "IR": "intervention",
+          "distance_to_goal": "distance_to_goal", "steps": "steps", "collisions": "collisions"}
 #: lower is better for these; the sign of the relative change is flipped so "+" always means better
-LOWER_IS_BETTER = {"NE", "distance_to_goal", "IR"}
-METRE_COLUMNS = {"NE", "distance_to_goal"}  # printed in metres (2 decimals), the others as fractions
+LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions"}
+RATES = {"SR", "IR"}
 
 
 def relative_change(new: float, base: float, column: str) -> float:
@@ -20,27 +42,141 @@ def relative_change(new: float, base: float, column: str) -> float:
     return -d if column in LOWER_IS_BETTER else d
 
 
-def comparison_table(rows: dict[str, dict[str, float]], baseline: str | None = None,
-                     columns: tuple[str, ...] = TABLE_COLUMNS) -> str:
-    """`rows`: name -> metrics (e.g. `aggregate_metrics(...)["overall"]`). Adds `(+x%)` vs `baseline`."""
-    if baseline is not None and baseline not in rows:
-        raise KeyError(f"comparison_table: baseline {baseline!r} not among rows {list(rows)}")
-    head = ["policy", "episodes", *columns]
-    body = []
-    for name, r in rows.items():
-        cells = [name, str(int(r.get("episodes", 0)))]
-        for c in columns:
-            v = float(r.get(c, float("nan")))
-            cell = f"{v:.2f}" if c in METRE_COLUMNS else f"{v:.3f}"
-            if baseline is not None and name != baseline:
-                rc = relative_change(v, float(rows[baseline].get(c, float("nan"))), c)
-                cell += f" ({rc:+.0%})" if math.isfinite(rc) else " (n/a)"
-            cells.append(cell)
-        body.append(cells)
+def episode_scores(records: Sequence[Mapping], column: str) -> torch.Tensor:
+    """`[N]` float64 scores of one column from per-episode records (bools -> 0/1)."""
+    field = FIELDS.get(column, column)
+    if records and field not in records[0]:
+        raise KeyError(f"column {column!r}: records have no field {field!r} (fields: {sorted(records[0])})")
+    return torch.tensor([float(r[field]) for r in records], dtype=torch.float64)
+
+
+def _scores(runs: Sequence[Sequence[Mapping]], column: str) -> torch.Tensor:
+    """Records of S runs (seeds) on the same episodes -> `[S, N]`."""
+    return torch.stack([episode_scores(r, column) for r in runs])
+
+
+def _same_episodes(a: Sequence[Sequence[Mapping]], b: Sequence[Sequence[Mapping]]) -> bool:
+    ids = lambda runs: [[r["episode_id"] for r in rec] for rec in runs]  # noqa: E731
+    return ids(a) == ids(b)
+
+
+def estimate(runs: Sequence[Sequence[Mapping]], column: str) -> Estimate:
+    """Mean of `column` over S runs x N episodes with its 95 % interval (Wilson for a single run's rates)."""
+    x = _scores(runs, column)
+    return rate_interval(x) if column in RATES else bootstrap_interval(x)
+
+
+def row_estimates(records: Sequence[Mapping], columns: Sequence[str] = TABLE_COLUMNS) -> dict[str, Estimate]:
+    """One evaluation's records -> column -> mean with its 95 % interval."""
+    return {c: estimate([records], c) for c in columns}
+
+
+def _cell(e: Estimate, column: str) -> str:
+    f = "{:.2f}" if column not in RATES and column != "SPL" else "{:.3f}"
+    return f"{f.format(e.value)} [{f.format(e.low)}, {f.format(e.high)}]"
+
+
+def _delta_cell(d: Estimate, base: float, column: str) -> str:
+    f = "{:+.2f}" if column not in RATES and column != "SPL" else "{:+.3f}"
+    cell = f"{f.format(d.value)} [{f.format(d.low)}, {f.format(d.high)}]"
+    if d.excludes_zero():
+        rc = relative_change(base + d.value, base, column)
+        cell += f" ({rc:+.0%})" if math.isfinite(rc) else " *"
+    return cell
+
+
+def _layout(head: list[str], body: list[list[str]]) -> list[str]:
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    fmt = lambda row: "  ".join(x.ljust(w) if i == 0 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))  # noqa: E731
-    lines = [fmt(head), *(fmt(r) for r in body)]
-    if baseline is not None and len(rows) > 1:
+    def fmt(row):
+        return "  ".join(x.ljust(w) if i == 0 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))
+    return [fmt(head), *(fmt(r) for r in body)]
+
+
+def seed_table(runs: Mapping[str, Sequence[Sequence[Mapping]]], baseline: str | None = None,
+               columns: Sequence[str] = TABLE_COLUMNS, iqm: Sequence[str] = ()) -> str:
+    """`runs`: row name -> per-seed episode records (S lists of N records, same episodes in every row).
+
+    One row per name: mean [95 % interval]; then one `name - baseline` row per other name with the
+    paired difference over the same seeds and episodes. `iqm`: columns that also get an IQM row.
+    """
+    if not runs:
+        raise ValueError("seed_table: no rows")
+    if baseline is not None and baseline not in runs:
+        raise KeyError(f"seed_table: baseline {baseline!r} not among rows {list(runs)}")
+    seeds = {len(r) for r in runs.values()}
+    n = {len(rec) for r in runs.values() for rec in r}
+    recs = [x for r in runs.values() for rec in r for x in rec]
+    missing = [c for c in columns if c not in iqm and recs and not all(FIELDS.get(c, c) in x for x in recs)]
+    columns = [c for c in columns if c not in missing]  # e.g. distance_to_goal in results written before it existed
+    head = ["policy", "seeds" if max(seeds) > 1 else "N", *columns]
+    body = [[name, str(len(r)) if max(seeds) > 1 else str(len(r[0])), *(_cell(estimate(r, c), c) for c in columns)]
+            for name, r in runs.items()]
+    for c in iqm:
+        for name, r in runs.items():
+            e = seed_aggregate(_scores(r, c))["iqm"]
+            body.append([f"{name} IQM", str(len(r)), *(_cell(e, c) if k == c else "" for k in columns)])
+    notes = []
+    if baseline is not None:
+        base = runs[baseline]
+        for name, r in runs.items():
+            if name == baseline:
+                continue
+            if not _same_episodes(r, base):
+                notes.append(f"{name} - {baseline}: not the same episodes/seeds, no paired difference")
+                continue
+            cells = [_delta_cell(paired_difference(_scores(r, c), _scores(base, c)), estimate(base, c).value, c)
+                     for c in columns]
+            body.append([f"{name} - {baseline}", "paired", *cells])
+    lines = _layout(head, body)
+    what = f"{max(n)} episodes" + (f" x {max(seeds)} seeds" if max(seeds) > 1 else "")
+    how = "bootstrap over seeds and episodes" if max(seeds) > 1 else "SR/IR Wilson, others bootstrap over episodes"
+    lines.append(f"mean [95% interval] over {what}: {how}")
+    if baseline is not None and len(runs) > 1:
         lower = "/".join(c for c in columns if c in LOWER_IS_BETTER)
-        lines.append(f"(+x%): change vs {baseline}, signed so + is better ({lower} lower is better)")
-    return "\n".join(lines)
+        lines.append(f"'- {baseline}' rows: paired difference over the same episodes; (+x%) change vs {baseline} "
+                     f"signed so + is better ({lower} lower is better), shown only where the interval excludes 0")
+    if missing:
+        notes.append(f"not in these records (written by an older version): {', '.join(missing)}")
+    return "\n".join(lines + notes)
+
+
+def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None = None,
+                     columns: Sequence[str] = TABLE_COLUMNS) -> str:
+    """One evaluation per row: `rows` name -> its per-episode records (`EvaluationResult.records`)."""
+    return seed_table({k: [v] for k, v in rows.items()}, baseline, columns)
+
+
+def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
+    """`results.json` of several seeds (as `train.py` writes) -> row name -> per-seed records.
+
+    Only rows present in every file are kept, in the first file's order.
+    """
+    loaded = []
+    for p in paths:
+        try:
+            loaded.append(json.loads(Path(p).read_text()))
+        except (OSError, json.JSONDecodeError) as e:
+            raise ValueError(f"{p}: cannot read a train results.json ({e})") from e
+    names = [k for k in loaded[0] if all(k in d and "records" in d[k] for d in loaded)]
+    if not names:
+        raise ValueError(f"{paths[0]}: no row with 'records' common to all {len(paths)} files")
+    return {k: [d[k]["records"] for d in loaded] for k in names}
+
+
+def main(argv: Sequence[str] | None = None) -> str:
+    """`python -m wanderland_nav.rl.report results.json ... [--baseline BC]`: the multi-seed table."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("results", nargs="+", type=Path, help="one train results.json per seed")
+    ap.add_argument("--baseline", default=None, help="row to difference against (default: the first)")
+    ap.add_argument("--iqm", nargs="*", default=[], help="columns that also get an IQM row, e.g. NE SPL")
+    a = ap.parse_args(argv)
+    runs = load_seed_runs(a.results)
+    table = seed_table(runs, a.baseline or next(iter(runs)), iqm=a.iqm)
+    print(table)
+    return table
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,40 @@
+"""Multi-seed aggregate table from several runs' results.json (the `-m seed=0,1,2` case)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from wanderland_nav.rl.report import load_seed_runs, main
+
+
+def _records(successes, ne0=10.0):
+    return [{"episode_id": i, "navigation_error": ne0 - s, "success": bool(s), "spl": 0.8 * s,
+             "intervention": not s} for i, s in enumerate(successes)]
+
+
+def test_seed_table_from_results_files(tmp_path, capsys):
+    paths = []
+    for seed in range(3):
+        bc = [int((i + seed) % 3 == 0) for i in range(30)]          # SR 1/3 on every seed
+        rl = [max(b, int(i % 2 == 0)) for i, b in enumerate(bc)]     # RL adds successes on every seed
+        p = tmp_path / f"seed_{seed}" / "results.json"
+        p.parent.mkdir()
+        p.write_text(json.dumps({"BC": {"records": _records(bc)}, "BC+RL": {"records": _records(rl)},
+                                 "only_here": {"summary": {}}}))
+        paths.append(p)
+    runs = load_seed_runs(paths)
+    assert list(runs) == ["BC", "BC+RL"] and [len(r) for r in runs["BC"]] == [30, 30, 30]
+    table = main([str(p) for p in paths] + ["--iqm", "NE"])
+    assert table == capsys.readouterr().out.rstrip("\n")
+    lines = table.splitlines()
+    assert lines[0].split()[:2] == ["policy", "seeds"] and lines[1].split()[:3] == ["BC", "3", "9.67"]
+    assert any(x.startswith("BC IQM") for x in lines)
+    delta = next(x for x in lines if x.startswith("BC+RL - BC"))
+    ne, sr = re.split(r"\s{2,}", delta.split("paired")[1].strip())[:2]
+    assert re.fullmatch(r"\+0\.\d+ \[\+0\.\d*[1-9]\d*, \+0\.\d+\] \(\+\d+%\)", sr), sr   # above 0: % shown
+    assert "over 30 episodes x 3 seeds" in table
+    with pytest.raises(ValueError, match="cannot read"):
+        load_seed_runs([tmp_path / "missing.json"])

@@ -1,0 +1,66 @@
+"""The episode file a training run uses, so that `episodes.num` is never silently ignored.
+
+A scene without episodes gets its `episodes.json` generated. A scene may ship one (the demo scene
+does, with 100 episodes); when the run asks for
+another count (or other split fractions), the scene's file is left untouched (released files are never
+overwritten) and a sibling `episodes_n<num>_s<seed>_<splits>.json` is generated once with the expert's
+generator and reused afterwards (the generator's args hash makes reruns free). Either way the log says
+which file and how many episodes per split the run uses.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+
+def split_counts(path: Path) -> dict[str, int]:
+    from wanderland_nav.episodes.schema import load_episode_file
+
+    eps = load_episode_file(path).episodes
+    return {s: sum(e.split == s for e in eps)
+            for s in ("train", "val", "test")}
+
+
+def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int,
+                     splits: tuple[float, float, float], goal_images: bool) -> Path:
+    """`existing` when it matches `num` and `splits` (or `num` is None), else a generated sibling file.
+
+    splits: train / val / test fractions of `num`.
+    """
+    if existing is not None and Path(existing).is_file():
+        counts = split_counts(Path(existing))
+        total = sum(counts.values())
+        if num is None:
+            log.info("episodes: %s (%s, episodes.num=null: the scene's own file)", existing, counts)
+            return Path(existing)
+        want = {"val": round(splits[1] * num), "test": round(splits[2] * num)}
+        if total == num and all(counts[s] == want[s] for s in want):
+            log.info("episodes: %s (%s)", existing, counts)
+            return Path(existing)
+        log.warning("episodes: %s has %d episodes %s; episodes.num=%d with splits %s requested: using a generated "
+                    "sibling file instead (the scene's file is left as it is)", existing, total, counts, num,
+                    list(splits))
+    if num is None:
+        raise FileNotFoundError(f"{scene.root}: no episodes.json and episodes.num=null: set episodes.num")
+    if scene.navmesh_path is None:
+        raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
+                                f"(python -m wanderland_nav.prepare scene={scene.root})")
+    from planners import NavMesh
+    from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+
+    tag = "-".join(f"{f:g}" for f in splits)
+    fresh = existing is not None and not Path(existing).exists()  # no file yet: make the scene's own
+    out = Path(existing) if fresh else Path(scene.root) / f"episodes_n{num}_s{seed}_{tag}.json"
+    # point-goal training needs no goal views; rendering them costs seconds each on a CPU
+    settings = GeneratorSettings(goal_images=goal_images, splits=tuple(splits))
+    _, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=int(num),
+                                      seed=int(seed), settings=settings)
+    what = "reused" if summary.skipped else f"generated in {summary.seconds:.0f}s"
+    log.info("episodes: %s (%d episodes %s, %s)", out, summary.kept, summary.splits, what)
+    if summary.kept != num:
+        log.warning("episodes: the generator kept %d of the %d requested episodes (%s)", summary.kept, num,
+                    summary.rejections)
+    return out
