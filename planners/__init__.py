@@ -8,6 +8,7 @@ queries follow Habitat's PathFinder names and take/return points in the mesh's o
 from planners.fields import GeodesicField
 from planners.navmesh import IslandInfo, NavMesh
 from planners.path import PathResult
+from planners.raster import GeodesicRaster
 from planners.settings import NavMeshSettings, OffMeshError
 
-__all__ = ["NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "GeodesicField", "IslandInfo"]
+__all__ = ["NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "GeodesicField", "GeodesicRaster", "IslandInfo"]

@@ -22,13 +22,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from planners.atomic import atomic_path
+from planners.frames import nav_from_scene_rotation
 from planners.heightfield import build_compact
 from planners.polygons import build_trimesh
 from planners.settings import FORMAT_VERSION, NavMeshSettings, OffMeshError
+from planners.threads import single_thread
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
 from planners.walk import closest_point_on_tris, point_in_tri
-from wanderland_nav.atomic import atomic_path
-from wanderland_nav.geometry import nav_from_scene_rotation
 
 SNAP_INSET = 1e-4  # m: snapped points move this far into their triangle (clear of walls for visibility tests)
 
@@ -439,7 +440,8 @@ class NavMesh:
         """Whether each point `[...,3]` lies on the navmesh within `max_height_delta` of its floor."""
         p = self._check_points(points)
         loc = self.to_local(p.reshape(-1, 3))
-        tri = self._locate_local(loc, max_height_delta)
+        with single_thread():
+            tri = self._locate_local(loc, max_height_delta)
         return (tri >= 0).reshape(p.shape[:-1]).numpy()
 
     def island_of(self, points, max_distance: float | None = None) -> np.ndarray:
@@ -517,7 +519,8 @@ class NavMesh:
     def move_along_surface(self, start, target):
         from planners.motion import move_along_surface
 
-        return move_along_surface(self, start, target)
+        with single_thread():
+            return move_along_surface(self, start, target)
 
     def __repr__(self):
         return (f"NavMesh(up={self.up_axis}, grid={self.width}x{self.height}, spans={len(self.span_col)}, "

@@ -111,3 +111,12 @@ def test_level_many_pairs(shared_data, name):
     assert nm.area > 1000
     _check_pairs(nm, 400, seed=7, n_paths=40)
     _check_lipschitz(nm, 3000, seed=8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", LEVELS)
+def test_level_raster_matches_exact_field(shared_data, name):
+    from test_raster import check_raster_against_exact
+
+    check_raster_against_exact(_bake(shared_data, name), n_points=2000, n_goals=8)
+

@@ -26,7 +26,7 @@ class EpisodeMetrics:
 
     episode_id: int | str
     episode_index: int  # index in the env's episode list
-    navigation_error: float  # geodesic distance to the goal at the end (Euclidean if unreachable)
+    navigation_error: float  # geodesic distance to the goal at the end (the last defined one, see undefined_distance_steps)
     success: bool
     spl: float
     intervention: bool
@@ -37,6 +37,7 @@ class EpisodeMetrics:
     steps: int
     environment: str | None = None  # "indoor" | "outdoor" | None (scene does not say)
     serial: int = -1  # order in which the env started this episode since its last seed
+    undefined_distance_steps: int = 0  # steps with no geodesic to the goal (NavEnv._step_distance's rule applied)
 
     def to_dict(self) -> dict:
         return asdict(self)
