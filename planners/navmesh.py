@@ -179,6 +179,7 @@ class NavMesh:
         self.rc_sorted = self.rc_key[self.rc_order]
         self.col_tris = self._column_triangles()
         self.col_island = self._column_islands()
+        self.col_tri_floor = self._column_triangle_floors()
         t = torch.from_numpy
         self._t = {
             "tri_xy": t(a.astype(np.float64)),
@@ -191,6 +192,7 @@ class NavMesh:
             "span_region": t(self.span_region.astype(np.int64)),
             "span_island": t(self.region_island[self.span_region].astype(np.int64)) if N else torch.zeros(0, dtype=torch.long),
             "col_tris": t(self.col_tris.astype(np.int64)),
+            "col_tri_floor": t(self.col_tri_floor),
             "col_island": t(self.col_island),
             "rc_sorted": t(self.rc_sorted.astype(np.int64)),
             "rc_order": t(self.rc_order.astype(np.int64)),
@@ -260,6 +262,17 @@ class NavMesh:
         K = max(1, int(np.diff(start).max()))
         out = np.full((self.ncols, K), -1, np.int32)
         out[col, np.arange(len(col)) - start[col]] = t
+        return out
+
+    def _column_triangle_floors(self) -> np.ndarray:
+        """`[ncols,K]` float64 beside `col_tris`: the floor height of the triangle's region in that column
+        (what `surface_z` answers there), NaN where the region has no span in it (the plane applies).
+        Point location then needs no search per candidate triangle."""
+        out = np.full(self.col_tris.shape, np.nan)
+        c, k = np.nonzero(self.col_tris >= 0)
+        if len(c):
+            span = self._rc_lookup(self.tri_region[self.col_tris[c, k]].astype(np.int64), c.astype(np.int64))
+            out[c, k] = np.where(span >= 0, self.span_floor[np.maximum(span, 0)] * self.ch, np.nan)
         return out
 
     def _column_islands(self) -> np.ndarray:
@@ -346,7 +359,10 @@ class NavMesh:
         K = cand.shape[1]
         xy = p[:, None, :2].expand(-1, K, 2)
         inside = point_in_tri(t["tri_xy"], candc, xy) & (cand >= 0)
-        z = self.surface_z(candc.reshape(-1), xy.reshape(-1, 2)).reshape(B, K)
+        plane = t["tri_plane"][candc]  # [B,K,3]: surface_z without its per-candidate search
+        zp = plane[..., 0] * p[:, None, 0] + plane[..., 1] * p[:, None, 1] + plane[..., 2]
+        zc = t["col_tri_floor"][col]
+        z = torch.where(torch.isnan(zc), zp, zc)
         dz = torch.where(inside, (p[:, 2:3] - z).abs(), torch.full_like(z, float("inf")))
         best = dz.argmin(1, keepdim=True)
         found = dz.gather(1, best)[:, 0] <= vertical_tolerance

@@ -41,7 +41,7 @@ from planners.fields import GeodesicField
 from planners.threads import single_thread
 from planners.walk import closest_point_in_tri, walk
 
-_BUILD_CHUNK = 4096  # samples per exact query while building (bounds the [R, 3S] work arrays)
+_BUILD_CHUNK = 1024  # samples per exact query while building (bounds the [R, 3S] float64 work arrays: ~10 MB each)
 
 
 class GeodesicRaster:

@@ -5,7 +5,9 @@
 On the demo navmesh (if given) and the three Recast levels in ../shared/data/meshes (baked with
 Recast's defaults), for 8 random goals and `--points` random navigable points: the raster's error
 against the exact field (e = raster - exact; the bound is 0 <= e <= 2 sqrt(2) cell_size), the share
-of points above the bound, the exact fallbacks, us per point for both, build seconds and kB per goal.
+of points above the bound, the share answered exactly, the exact fallbacks; then the cost of one
+env-sized query (`--batch` agents, 8 goals, best of 30, process CPU time so other jobs on the
+machine count less) for both, and the raster's build CPU seconds and kB per goal.
 """
 
 from __future__ import annotations
@@ -32,17 +34,26 @@ def levels(demo: Path | None):
         yield name, NavMesh.bake(trimesh.load(SHARED / f"{name}.obj", force="mesh"), NavMeshSettings())
 
 
-def compare(nm: NavMesh, n_points: int, seed: int = 0) -> dict:
+def cpu_us_per_query(fn, pts, gi, repeats: int = 30) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn(pts, gi)
+        best = min(best, time.process_time() - t0)
+    return 1e6 * best
+
+
+def compare(nm: NavMesh, n_points: int, batch: int, seed: int = 0) -> dict:
     goals = nm.random_navigable_points(8, seed=seed)
     field = nm.distance_field(goals)
+    t0 = time.process_time()
     raster = field.raster()
+    build_cpu = time.process_time() - t0
     pts = nm.random_navigable_points(n_points, seed=seed + 1)
     gi = np.arange(n_points) % 8
-    t0 = time.perf_counter()
     exact = field.lookup(pts, gi).numpy()
-    t1 = time.perf_counter()
     fast = raster.lookup(pts, gi).numpy()
-    t2 = time.perf_counter()
+    fallbacks = raster.stats["exact_fallbacks"]
     fin = np.isfinite(exact)
     if not np.array_equal(fin, np.isfinite(fast)):
         raise AssertionError("raster and exact field disagree on reachability")
@@ -50,8 +61,10 @@ def compare(nm: NavMesh, n_points: int, seed: int = 0) -> dict:
     bound = 2 * np.sqrt(2) * nm.cs
     return {"cs": nm.cs, "pairs": raster.source.shape[1], "e_min": e.min(), "e_max": e.max(),
             "e_p99": np.quantile(e, 0.99), "over%": 100 * (e > bound + 1e-3).mean(), "exact_ok%": 100 * (np.abs(e) < 1e-3).mean(),
-            "fallback%": 100 * raster.stats["exact_fallbacks"] / n_points, "us_exact": 1e6 * (t1 - t0) / n_points,
-            "us_raster": 1e6 * (t2 - t1) / n_points, "build_s/goal": raster.build_seconds / 8,
+            "fallback%": 100 * fallbacks / n_points,
+            f"us_exact@{batch}": cpu_us_per_query(field.lookup, pts[:batch], gi[:batch]),
+            f"us_raster@{batch}": cpu_us_per_query(raster.lookup, pts[:batch], gi[:batch]),
+            "build_cpu_s/goal": build_cpu / 8,
             "kB/goal": raster.source.nbytes / 8 / 1e3, "index_kB": raster._pair_id.nbytes / 1e3}
 
 
@@ -60,11 +73,12 @@ def main():
     ap.add_argument("--demo", type=Path, default=None)
     ap.add_argument("--points", type=int, default=4000)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--batch", type=int, default=256)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(f"{args.points} points, 8 goals, {args.threads} threads, load average {os.getloadavg()[0]:.2f}")
     for name, nm in levels(args.demo):
-        r = compare(nm, args.points)
+        r = compare(nm, args.points, args.batch)
         print(f"{name:>10}: " + "  ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()),
               flush=True)
 

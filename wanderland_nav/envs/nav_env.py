@@ -47,9 +47,10 @@ from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
 
 def _one_thread_when_blind(method):
-    """Run a blind (camera-off) step or reset on one intra-op thread: all its work is small `[B]`
-    tensor ops, which a thread pool only slows down, and on a loaded machine by milliseconds per
-    op (`planners/threads.py`). With the camera on, the renderer keeps the caller's threads."""
+    """Run a blind (camera-off) env call on one intra-op thread: all its work, TorchRL's included, is
+    small `[B]` tensor ops, which a thread pool only slows down, and on a loaded machine by
+    milliseconds per op (`planners/threads.py`). With the camera on, the renderer keeps the
+    caller's threads (the planners' queries still run on one: they switch themselves)."""
 
     @functools.wraps(method)
     def run(self, *args, **kwargs):
@@ -79,6 +80,10 @@ class NavEnv(EnvBase):
     """
 
     batch_locked = True
+    # TorchRL's entry points, its own bookkeeping included (tensordict copies, `where` on resets)
+    step = _one_thread_when_blind(EnvBase.step)
+    reset = _one_thread_when_blind(EnvBase.reset)
+    step_and_maybe_reset = _one_thread_when_blind(EnvBase.step_and_maybe_reset)
 
     def __init__(
         self,
@@ -209,7 +214,6 @@ class NavEnv(EnvBase):
         self._rng = torch.Generator().manual_seed(0 if seed is None else int(seed))
         self._cursor = 0
 
-    @_one_thread_when_blind
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B = self.batch_size[0]
         mask = None if tensordict is None else tensordict.get(keys.RESET, None)
@@ -225,7 +229,6 @@ class NavEnv(EnvBase):
         out.update({keys.DONE: false, keys.TERMINATED: false.clone(), keys.TRUNCATED: false.clone()})
         return out
 
-    @_one_thread_when_blind
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         t0 = time.perf_counter()
         cfg = self.config
