@@ -90,10 +90,10 @@ class GeodesicRaster:
         nm, field = self.nm, self.field
         out = np.full((len(field), samples.shape[0]), -1, dtype=np.int32)
         c, k = np.nonzero(self._pair_id >= 0)
-        self._pair_island = nm.tri_island[nm.col_tris[c, k]]  # [P], in pair order
-        self._goal_island = goal_island = field.goal_island.numpy()
+        pair_island = nm.tri_island[nm.col_tris[c, k]]  # [P], in pair order
+        goal_island = field.goal_island.numpy()
         for g in range(len(field)):  # per goal: its island's samples, in chunks
-            rows = np.flatnonzero(self._pair_island == goal_island[g])
+            rows = np.flatnonzero(pair_island == goal_island[g])
             for j in range(0, rows.shape[0], _BUILD_CHUNK):
                 r = rows[j:j + _BUILD_CHUNK]
                 out[g, r] = field.query_local(samples[r], np.full(r.shape[0], g, dtype=np.int64))[1]
@@ -114,7 +114,6 @@ class GeodesicRaster:
     def _lookup_local(self, loc: np.ndarray, gi: np.ndarray) -> np.ndarray:
         pair = self._pair_of(loc)
         s = np.where(pair >= 0, self.source[gi, np.maximum(pair, 0)], -1).astype(np.int64)
-        apart = (pair >= 0) & (self._pair_island[np.maximum(pair, 0)] != self._goal_island[gi])
         ok = s >= 0
         comb = np.where(s == self._M, self._M + gi, s)  # combined source id: corner m, or goal M + g
         comb[~ok] = 0
@@ -122,9 +121,9 @@ class GeodesicRaster:
         d = np.hypot(loc[:, 0] - sxy[:, 0], loc[:, 1] - sxy[:, 1]) + self._c2g[gi, np.where(ok, s, 0)]
         rows = np.flatnonzero(ok)
         ok[rows] = self._sees(loc[rows], gi[rows], comb[rows])
-        d[apart] = np.inf  # on a triangle of another island: no path, as the exact field says
-        exact = np.flatnonzero(~ok & ~apart)
-        if exact.shape[0]:  # off the triangles, or the sample's source hidden from p
+        exact = np.flatnonzero(~ok)
+        if exact.shape[0]:  # off the triangles, another island (the exact field's island rule decides),
+            # or the sample's source hidden from p
             d[exact] = self.field.query_local(loc[exact], gi[exact])[0]
         self.stats["queries"] += loc.shape[0]
         self.stats["exact_fallbacks"] += int(exact.shape[0])
