@@ -45,7 +45,8 @@ def main():
     fast, env = evaluate(scene, navmesh, args.batch, exact=False)
     ref, _ = evaluate(scene, navmesh, args.batch, exact=True)
     print(f"{len(ref.records)} episodes, load average {os.getloadavg()[0]:.2f}, raster exact fallbacks "
-          f"{env.step_field.stats['exact_fallbacks']} of {env.step_field.stats['queries']} lookups")
+          f"{env.step_field.stats['exact_fallbacks']} of {env.step_field.stats['queries']} lookups, steps with an "
+          f"undefined distance {sum(r['undefined_distance_steps'] for r in fast.records)}")
     worst = {}
     for a, b in zip(fast.records, ref.records):
         assert a["episode_id"] == b["episode_id"]
