@@ -1,6 +1,8 @@
-"""Write-to-temp-then-rename for the navmesh files (`wanderland_nav.atomic` re-exports it).
+"""Write-to-temp-then-rename for the navmesh files.
 
-Here so that `planners` stands alone (it never imports `wanderland_nav`).
+Here so that `planners` stands alone (it never imports `wanderland_nav`). `wanderland_nav.atomic`
+keeps its own copy: importing this one from there would load the whole `planners` package into
+layers DESIGN.md keeps apart from it (render, policies). One home for both is the lead's call.
 """
 
 from __future__ import annotations

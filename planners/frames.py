@@ -1,7 +1,8 @@
 """Up axes and the nav frame (z up) of a scene frame: the one frame convention `planners/` needs.
 
-Lives here so `planners` stands alone (it never imports `wanderland_nav`); `wanderland_nav.geometry`
-re-exports these names.
+Here so `planners` stands alone (it never imports `wanderland_nav`). `wanderland_nav.geometry` keeps
+its own copy because DESIGN.md's layering forbids it any import (tests/test_layering.py);
+tests/planners/test_raster.py checks that the two agree on every up axis.
 """
 
 from __future__ import annotations

@@ -18,7 +18,19 @@ import math
 import numpy as np
 import torch
 
-from planners.frames import UP_AXES, nav_from_scene_rotation, parse_up_axis  # noqa: F401 (re-exported)
+UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def parse_up_axis(up_axis: str, *, source: str = "up_axis") -> str:
+    """Normalise an up-axis string ('y', '+Y', '-y', ...) or raise naming `source`."""
+    if not isinstance(up_axis, str):
+        raise ValueError(f"{source}: up axis must be a string like '+z' or '-y', got {up_axis!r}")
+    s = up_axis.strip().lower()
+    if s in ("x", "y", "z"):
+        s = "+" + s
+    if s not in UP_AXES:
+        raise ValueError(f"{source}: unknown up axis {up_axis!r}; expected one of {UP_AXES}")
+    return s
 
 
 def up_vector(up_axis: str) -> np.ndarray:
@@ -27,6 +39,25 @@ def up_vector(up_axis: str) -> np.ndarray:
     v = np.zeros(3)
     v["xyz".index(s[1])] = 1.0 if s[0] == "+" else -1.0
     return v
+
+
+def nav_from_scene_rotation(up_axis: str) -> np.ndarray:
+    """Rotation `[3, 3]` (float64, det +1) taking scene-frame vectors to the nav frame (z up).
+
+    The choice of the horizontal axes is fixed per up axis so the mapping is reproducible:
+    +z: identity; -z: 180 deg about x; +y: +90 deg about x (Recast, glTF); -y: -90 deg about x
+    (COLMAP / Wanderland v1); +x: -90 deg about y; -x: +90 deg about y.
+    """
+    s = parse_up_axis(up_axis)
+    table = {
+        "+z": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+        "-z": [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
+        "+y": [[1, 0, 0], [0, 0, -1], [0, 1, 0]],
+        "-y": [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
+        "+x": [[0, 0, -1], [0, 1, 0], [1, 0, 0]],
+        "-x": [[0, 0, 1], [0, 1, 0], [-1, 0, 0]],
+    }
+    return np.asarray(table[s], dtype=np.float64)
 
 
 # --------------------------------------------------------------------------- quaternions

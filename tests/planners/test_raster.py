@@ -71,3 +71,15 @@ def test_planners_never_imports_wanderland_nav():
             "assert not bad, bad\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("up", ["+x", "-x", "+y", "-y", "+z", "-z", "Y", " -z "])
+def test_frames_agree_with_wanderland_nav_geometry(up):
+    from planners import frames
+    from wanderland_nav import geometry
+
+    assert frames.UP_AXES == geometry.UP_AXES
+    assert frames.parse_up_axis(up) == geometry.parse_up_axis(up)
+    assert np.array_equal(frames.nav_from_scene_rotation(up), geometry.nav_from_scene_rotation(up))
+    with pytest.raises(ValueError, match="unknown up axis"):
+        frames.parse_up_axis("w")
