@@ -2,6 +2,11 @@
 
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
                                     [--device cpu|cuda] [--threads 2] [--max-gaussians 10000] [--no-off]
+                                    [--compete 0] [--repeats 1]
+
+`--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
+CPU-bound busy-loop processes for the duration (the "other jobs on the machine" case); they are ended
+at exit. `--repeats R` times each row R times and prints the best and the median.
 
 For every (resolution, B) it builds a NavEnv on the demo scene (built and prepared on first use,
 episodes generated if missing), drives it with the expert policy through `step_and_maybe_reset`
@@ -14,6 +19,10 @@ bookkeeping. A last row per B runs with the camera disabled: the env's cost with
 from __future__ import annotations
 
 import argparse
+import os
+import statistics
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -77,24 +86,37 @@ def main():
     ap.add_argument("--preset", default="default", choices=["tiny", "default"])
     ap.add_argument("--root", type=Path, default=Path("data/scenes/bench"))
     ap.add_argument("--batch", type=int, nargs="+", default=[1, 16, 64])
-    ap.add_argument("--res", type=int, nargs="+", default=[64, 128])
+    ap.add_argument("--res", type=int, nargs="*", default=[64, 128])
     ap.add_argument("--steps", type=int, default=3)
     ap.add_argument("--episodes", type=int, default=60)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--max-gaussians", type=int, default=None, help="render.max_gaussians LOD (default: all)")
     ap.add_argument("--no-off", action="store_true", help="skip the camera-off row")
+    ap.add_argument("--compete", type=int, default=0, help="CPU-bound busy-loop processes running alongside")
+    ap.add_argument("--repeats", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
-    print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
-          f"{args.steps} timed steps after 1 warm-up")
-    cols = ["B", "res", "fps", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
-    print("  ".join(f"{c:>9}" for c in cols), flush=True)
-    for B in args.batch:
-        for res in args.res + ([] if args.no_off else [None]):
-            r = bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device, enabled=res is not None)
-            print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols), flush=True)
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.compete)]
+    try:
+        print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
+              f"{args.steps} timed steps after 1 warm-up, {args.compete} competing busy loops, "
+              f"load average {os.getloadavg()[0]:.2f}")
+        cols = ["B", "res", "fps", "fps_med", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+        print("  ".join(f"{c:>9}" for c in cols), flush=True)
+        for B in args.batch:
+            for res in args.res + ([] if args.no_off else [None]):
+                runs = [bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device,
+                                  enabled=res is not None) for _ in range(args.repeats)]
+                r = max(runs, key=lambda x: x["fps"])
+                r["fps_med"] = statistics.median(x["fps"] for x in runs)
+                print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols),
+                      flush=True)
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
 
 
 if __name__ == "__main__":

@@ -8,8 +8,8 @@ queries follow Habitat's PathFinder names and take/return points in the mesh's o
 from planners.fields import GeodesicField
 from planners.navmesh import IslandInfo, NavMesh
 from planners.path import PathResult
+from planners.raster import GeodesicRaster
 from planners.settings import NavMeshFileError, NavMeshSettings, OffMeshError
 
-__all__ = [
-    "NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "NavMeshFileError", "GeodesicField", "IslandInfo",
-]
+__all__ = ["NavMesh", "NavMeshSettings", "PathResult", "OffMeshError", "NavMeshFileError", "GeodesicField",
+           "GeodesicRaster", "IslandInfo"]

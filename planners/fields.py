@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from planners.path import _located, _visible_to_nodes
+from planners.threads import single_thread
 from planners.visibility import VisPolys, bucketed_fan_index, tangent_ok, visible
 
 
@@ -72,6 +73,12 @@ class GeodesicField:
     def __len__(self) -> int:
         return self.goal_xy.shape[0]
 
+    def raster(self):
+        """The O(1) per-step lookup for the same goals (`planners.raster.GeodesicRaster`)."""
+        from planners.raster import GeodesicRaster
+
+        return GeodesicRaster(self)
+
     def lookup(self, points, goal_index) -> torch.Tensor:
         """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B].
 
@@ -97,17 +104,27 @@ class GeodesicField:
         loc = p.reshape(-1, 3).astype(np.float64, copy=False) @ self._np["R_T"] - self._np["bmin"]  # [B,3] local
         if gi.shape[0] != loc.shape[0]:
             raise ValueError(f"GeodesicField.lookup: {loc.shape[0]} points but {gi.shape[0]} goal indices")
-        general = ~self._goal_simple_np[gi]
-        if not general.any():
-            d = self._lookup_simple(loc, gi)
-        else:  # goals on islands with overlapping levels: triangle walks
-            d = np.empty(loc.shape[0])
-            d[~general] = self._lookup_simple(loc[~general], gi[~general])
-            d[general] = self._lookup_general(torch.from_numpy(loc[general]),
-                                              torch.from_numpy(gi[general])).numpy()
+        with single_thread():
+            d, _ = self.query_local(loc, gi)
         np_dtype = _NUMPY_OF.get(out_dtype)
         out = torch.from_numpy(d.astype(np_dtype).reshape(shape)) if np_dtype else torch.from_numpy(d).to(out_dtype).reshape(shape)
         return out if device is None or device.type == "cpu" else out.to(device)
+
+    def query_local(self, loc: np.ndarray, gi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distances `[B]` (float64, inf where apart) from local nav-frame points loc[B,3] to goals gi[B],
+        and each point's *source* `[B]` int64: the corner a < M its shortest path bends around first
+        (d = |p a| + corner_to_goal[g, a]), M when it sees its goal (d = |p g|), -1 where d is inf."""
+        d = np.full(loc.shape[0], np.inf)
+        src = np.full(loc.shape[0], -1, dtype=np.int64)
+        general = ~self._goal_simple_np[gi]
+        simple = np.flatnonzero(~general)
+        if simple.shape[0]:
+            d[simple], src[simple] = self._lookup_simple(loc[simple], gi[simple])
+        if general.any():  # goals on islands with overlapping levels: triangle walks
+            rows = np.flatnonzero(general)
+            dg, sg = self._lookup_general(torch.from_numpy(loc[rows]), torch.from_numpy(gi[rows]))
+            d[rows], src[rows] = dg.numpy(), sg.numpy()
+        return d, src
 
     @property
     def _goal_simple(self) -> torch.Tensor:
@@ -213,26 +230,28 @@ class GeodesicField:
         d(p, g) = |p g| if p sees g, else min over the tangent corners a that p sees of |p a| + d(a, g).
         Corners are searched in rounds: the K cheapest first (the first visible one in that order is
         the minimum), then all remaining ones for the few points whose K were all hidden. Same
-        candidates and tests as a full scan, hence the same (exact) answer."""
+        candidates and tests as a full scan, hence the same (exact) answer. -> (d[B], source[B])
+        as `query_local`."""
         n = self._np
         B = loc.shape[0]
         px, py = loc[:, 0], loc[:, 1]
         d = np.full(B, np.inf)
+        out = (d, np.full(B, -1, dtype=np.int64))  # distances and sources, filled in place
         rows = np.flatnonzero(self._island_np(loc) == n["goal_island"][gi])  # inf on other islands
         if rows.shape[0] == 0:
-            return d
+            return out
         gr = gi[rows]
         # |p g| <= |p a| + d(a, g) for every corner a: points that see their goal are done
         gsrc = n["M"] + gr  # the goals as visibility sources
         direct = self._sees(gsrc, px[rows], py[rows])
-        self._exact(d, rows, np.flatnonzero(direct), None, gsrc[direct], None, px, py)
+        self._exact(out, rows, np.flatnonzero(direct), None, gsrc[direct], None, px, py)
         rows, gr = rows[~direct], gr[~direct]
         if rows.shape[0] == 0:
-            return d
+            return out
         src, lin_c, c2g_c = self._candidates(gr)
         S = src.shape[0]
         if S == 0:
-            return d
+            return out
         R = rows.shape[0]
         qx, qy = px[rows], py[rows]
         # both tangency cross products and |p a|^2 are affine/quadratic in p: one [R,4] @ [4,3S] product
@@ -258,7 +277,7 @@ class GeodesicField:
         found = np.isfinite(tv[np.arange(R), j])
         hit = np.flatnonzero(found)
         # if one of the K cheapest is seen, the cheapest seen one is the minimum over all seen corners
-        self._exact(d, rows, hit, top[hit, j[hit]], src, c2g_c, px, py)
+        self._exact(out, rows, hit, top[hit, j[hit]], src, c2g_c, px, py)
         if K < S:
             rest = np.flatnonzero(~found & fin.all(1))
             if rest.shape[0]:  # the K cheapest all hidden (and more candidates exist): scan the remaining ones
@@ -269,8 +288,8 @@ class GeodesicField:
                 vr[ri[~ok], ci[~ok]] = np.inf  # hidden corners out
                 j2 = vr.argmin(1)
                 r2 = np.flatnonzero(np.isfinite(vr[np.arange(rest.shape[0]), j2]))
-                self._exact(d, rows, rest[r2], j2[r2], src, c2g_c, px, py)
-        return d
+                self._exact(out, rows, rest[r2], j2[r2], src, c2g_c, px, py)
+        return out
 
     def _sees(self, src, qx, qy):
         """Visibility of points q[R] from combined sources src[R] (corner m < M, goal M + g), numpy,
@@ -294,20 +313,23 @@ class GeodesicField:
         ex, ey = hx[i1] - x0, hy[i1] - y0
         return ex * (qy - y0) - ey * (qx - x0) >= -1e-9 * (np.abs(ex) + np.abs(ey))
 
-    def _exact(self, d, rows, r, c, src, c2g_c, px, py):
-        """d[rows[r]] = |p s| + d(s, g) for sources src[c[k]] of rows r[k], in the direct form
-        (c None: src[k] are the rows' goals, d(s, g) = 0)."""
+    def _exact(self, out, rows, r, c, src, c2g_c, px, py):
+        """out = (d, source): d[rows[r]] = |p s| + d(s, g) for sources src[c[k]] of rows r[k], in the direct
+        form (c None: src[k] are the rows' goals as combined sources M + g, d(s, g) = 0, source M)."""
         n = self._np
+        d, source = out
         rr = rows[r]
         if c is None:
             d[rr] = np.hypot(px[rr] - n["src_x"][src], py[rr] - n["src_y"][src])
+            source[rr] = n["M"]
             return
         s = src[c]
         g = c2g_c[c] if c2g_c.ndim == 1 else c2g_c[r, c]
         d[rr] = np.hypot(px[rr] - n["src_x"][s], py[rr] - n["src_y"][s]) + g
+        source[rr] = s
 
     def _lookup_general(self, loc, gi):
-        """Any navmesh (islands with overlapping levels walk the triangles)."""
+        """Any navmesh (islands with overlapping levels walk the triangles). -> (d[B], source[B]) as query_local."""
         nm = self.nm
         t = nm._t
         B = loc.shape[0]
@@ -320,8 +342,13 @@ class GeodesicField:
         gxy = self.goal_xy[gi]
         direct = visible(t["tri_xy"], t["nbr"], nm.walls, isl, self.goal_tri[gi], gxy, xy, self.goal_vis, gi,
                          t["tri_region"][tri], t["tri_region"])
+        M = t["node_xy"].shape[0]
         d = torch.where(direct, (xy - gxy).norm(dim=1), torch.full((B,), float("inf"), dtype=torch.float64))
-        if t["node_xy"].shape[0]:
+        src = torch.where(direct, M, -1)
+        if M:
             A = _visible_to_nodes(nm, xy, tri, isl)  # [B,M]
-            d = torch.minimum(d, (A + self.corner_to_goal[gi]).min(1).values)
-        return torch.where(isl == self.goal_island[gi], d, torch.inf)
+            via, a = (A + self.corner_to_goal[gi]).min(1)
+            src = torch.where(via < d, a, src)
+            d = torch.minimum(d, via)
+        same = (isl == self.goal_island[gi]) & torch.isfinite(d)
+        return torch.where(same, d, torch.inf), torch.where(same, src, -1)

@@ -24,13 +24,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from planners.atomic import atomic_path
+from planners.frames import nav_from_scene_rotation
 from planners.heightfield import build_compact
 from planners.polygons import build_trimesh
 from planners.settings import FORMAT_VERSION, NavMeshFileError, NavMeshSettings, OffMeshError
+from planners.threads import single_thread
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
 from planners.walk import closest_point_on_tris, point_in_tri
-from wanderland_nav.atomic import atomic_path
-from wanderland_nav.geometry import nav_from_scene_rotation
 
 SNAP_INSET = 1e-4  # m: snapped points move this far into their triangle (clear of walls for visibility tests)
 
@@ -189,6 +190,7 @@ class NavMesh:
         self.rc_sorted = self.rc_key[self.rc_order]
         self.col_tris = self._column_triangles()
         self.col_island = self._column_islands()
+        self.col_tri_floor = self._column_triangle_floors()
         t = torch.from_numpy
         self._t = {
             "tri_xy": t(a.astype(np.float64)),
@@ -201,6 +203,7 @@ class NavMesh:
             "span_region": t(self.span_region.astype(np.int64)),
             "span_island": t(self.region_island[self.span_region].astype(np.int64)) if N else torch.zeros(0, dtype=torch.long),
             "col_tris": t(self.col_tris.astype(np.int64)),
+            "col_tri_floor": t(self.col_tri_floor),
             "col_island": t(self.col_island),
             "rc_sorted": t(self.rc_sorted.astype(np.int64)),
             "rc_order": t(self.rc_order.astype(np.int64)),
@@ -231,6 +234,8 @@ class NavMesh:
         else:
             coef = np.zeros((0, 3))
         self._t["tri_plane"] = torch.from_numpy(coef)
+        self._tri_plane_np = coef
+        self._edge_lin = _edge_lines(a)
         self._t["node_z"] = (self.surface_z(self._t["node_tri"], self._t["node_xy"]) if len(self.node_xy)
                              else torch.zeros(0, dtype=torch.float64))
         self.node_z_np = self._t["node_z"].numpy()
@@ -270,6 +275,17 @@ class NavMesh:
         K = max(1, int(np.diff(start).max()))
         out = np.full((self.ncols, K), -1, np.int32)
         out[col, np.arange(len(col)) - start[col]] = t
+        return out
+
+    def _column_triangle_floors(self) -> np.ndarray:
+        """`[ncols,K]` float64 beside `col_tris`: the floor height of the triangle's region in that column
+        (what `surface_z` answers there), NaN where the region has no span in it (the plane applies).
+        Point location then needs no search per candidate triangle."""
+        out = np.full(self.col_tris.shape, np.nan)
+        c, k = np.nonzero(self.col_tris >= 0)
+        if len(c):
+            span = self._rc_lookup(self.tri_region[self.col_tris[c, k]].astype(np.int64), c.astype(np.int64))
+            out[c, k] = np.where(span >= 0, self.span_floor[np.maximum(span, 0)] * self.ch, np.nan)
         return out
 
     def _column_islands(self) -> np.ndarray:
@@ -340,29 +356,35 @@ class NavMesh:
 
     def _locate_local(self, p: torch.Tensor, vertical_tolerance: float, return_z: bool = False):
         """Triangle `[B]` (-1 if none) containing local points p[B,3] in 2D whose floor is within
-        `vertical_tolerance` of the point's height (the nearest level in height wins)."""
-        t = self._t
+        `vertical_tolerance` of the point's height (the nearest level in height wins); with `return_z`
+        also that floor's height `[B]`. numpy inside (`_locate_np`): a few calls on `[B,K]` arrays."""
+        tri, z = self._locate_np(p.detach().cpu().numpy().astype(np.float64, copy=False), vertical_tolerance)
+        tri = torch.from_numpy(tri)
+        return (tri, torch.from_numpy(z).to(p.dtype)) if return_z else tri
+
+    def _locate_np(self, p: np.ndarray, vertical_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+        """numpy point location through the column index: (triangle `[B]` int64 or -1, its floor z `[B]`,
+        p's own z where none)."""
         B = p.shape[0]
-        out = torch.full((B,), -1, dtype=torch.long)
         if B == 0 or len(self.tris) == 0:
-            return (out, p[:, 2].clone()) if return_z else out
-        ix = torch.floor(p[:, 0] / self.cs).long()
-        iy = torch.floor(p[:, 1] / self.cs).long()
+            return np.full(B, -1, dtype=np.int64), p[:, 2].copy()
+        ix = np.floor(p[:, 0] / self.cs).astype(np.int64)
+        iy = np.floor(p[:, 1] / self.cs).astype(np.int64)
         ing = (ix >= 0) & (iy >= 0) & (ix < self.width) & (iy < self.height)
-        col = torch.where(ing, ix + iy * self.width, torch.zeros_like(ix))
-        cand = t["col_tris"][col]  # [B,K]
-        cand = torch.where(ing[:, None], cand, torch.full_like(cand, -1))
-        candc = cand.clamp_min(0)
-        K = cand.shape[1]
-        xy = p[:, None, :2].expand(-1, K, 2)
-        inside = point_in_tri(t["tri_xy"], candc, xy) & (cand >= 0)
-        z = self.surface_z(candc.reshape(-1), xy.reshape(-1, 2)).reshape(B, K)
-        dz = torch.where(inside, (p[:, 2:3] - z).abs(), torch.full_like(z, float("inf")))
-        best = dz.argmin(1, keepdim=True)
-        found = dz.gather(1, best)[:, 0] <= vertical_tolerance
-        if return_z:
-            return torch.where(found, candc.gather(1, best)[:, 0], out), z.gather(1, best)[:, 0]
-        return torch.where(found, candc.gather(1, best)[:, 0], out)
+        col = np.where(ing, ix + iy * self.width, 0)
+        cand = np.where(ing[:, None], self.col_tris[col], -1)  # [B,K]
+        candc = np.maximum(cand, 0)
+        lin = self._edge_lin[candc]  # [B,K,3,3]: signed distance to each edge = a x + b y + c
+        px, py = p[:, 0, None, None], p[:, 1, None, None]
+        inside = ((lin[..., 0] * px + lin[..., 1] * py + lin[..., 2]) >= -1e-9).all(-1) & (cand >= 0)
+        plane = self._tri_plane_np[candc]  # [B,K,3]
+        zc = self.col_tri_floor[col]
+        z = np.where(np.isnan(zc), plane[..., 0] * px[..., 0] + plane[..., 1] * py[..., 0] + plane[..., 2], zc)
+        dz = np.where(inside, np.abs(p[:, 2:3] - z), np.inf)
+        best = dz.argmin(1)
+        rows = np.arange(B)
+        found = dz[rows, best] <= vertical_tolerance
+        return np.where(found, candc[rows, best], -1).astype(np.int64), np.where(found, z[rows, best], p[:, 2])
 
     def _island_by_column(self, p: torch.Tensor) -> torch.Tensor:
         """Island `[B]` of local points from the raster: the column's only island, else the span in
@@ -450,7 +472,8 @@ class NavMesh:
         """Whether each point `[...,3]` lies on the navmesh within `max_height_delta` of its floor."""
         p = self._check_points(points)
         loc = self.to_local(p.reshape(-1, 3))
-        tri = self._locate_local(loc, max_height_delta)
+        with single_thread():
+            tri = self._locate_local(loc, max_height_delta)
         return (tri >= 0).reshape(p.shape[:-1]).numpy()
 
     def island_of(self, points, max_distance: float | None = None) -> np.ndarray:
@@ -528,12 +551,23 @@ class NavMesh:
     def move_along_surface(self, start, target):
         from planners.motion import move_along_surface
 
-        return move_along_surface(self, start, target)
+        with single_thread():
+            return move_along_surface(self, start, target)
 
     def __repr__(self):
         return (f"NavMesh(up={self.up_axis}, grid={self.width}x{self.height}, spans={len(self.span_col)}, "
                 f"triangles={len(self.tris)}, corners={len(self.node_xy)}, islands={len(self.islands)}, "
                 f"area={self.area:.1f} m^2)")
+
+
+def _edge_lines(tri_xy: np.ndarray) -> np.ndarray:
+    """`[T,3,3]` per triangle edge k (vertex k -> k+1) the coefficients (a, b, c) of the signed
+    distance `a x + b y + c` of a point to it, positive inside (counter-clockwise triangles)."""
+    u, w = tri_xy, np.roll(tri_xy, -1, axis=1)
+    e = w - u
+    n = np.sqrt((e ** 2).sum(-1)).clip(1e-30)
+    a, b = -e[..., 1] / n, e[..., 0] / n
+    return np.stack([a, b, -(a * u[..., 0] + b * u[..., 1])], -1)
 
 
 def island_is_simple(region_island: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from wanderland_nav.geometry import parse_up_axis
+from planners.frames import parse_up_axis
 
 
 # Version of the baked navmesh layout (navmesh.npz); part of `bake_hash` so caches and scene

@@ -97,6 +97,21 @@ def point_in_tri(tri_xy: torch.Tensor, tris: torch.Tensor, pts: torch.Tensor, ep
     return (o >= -eps).all(dim=-1)
 
 
+def closest_point_in_tri(tri_xy: torch.Tensor, pts: torch.Tensor, inset: float = 1e-4) -> torch.Tensor:
+    """Points `[B,2]` of triangles tri_xy[B,3,2] (counter-clockwise) nearest to pts[B,2]; those that land
+    on the boundary move `inset` m towards the centroid (strictly inside, clear of walls)."""
+    U, W = tri_xy, tri_xy.roll(-1, dims=1)
+    e = W - U  # [B,3,2]
+    P = pts[:, None]
+    t = (((P - U) * e).sum(-1) / (e * e).sum(-1).clamp_min(1e-30)).clamp(0, 1)
+    on_edge = U + t[..., None] * e  # [B,3,2] nearest point of each edge
+    cp = on_edge[torch.arange(pts.shape[0]), ((on_edge - P) ** 2).sum(-1).argmin(1)]
+    inside = (_cross(e[..., 0], e[..., 1], P[..., 0] - U[..., 0], P[..., 1] - U[..., 1]) >= 0).all(1)
+    v = tri_xy.mean(1) - cp
+    nudged = cp + inset * v / v.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    return torch.where(inside[:, None], pts, nudged)
+
+
 def closest_point_on_tris(tri_xy: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
     """2D closest points `[B,T,2]` on every triangle tri_xy[T,3,2] to pts[B,2]."""
     U = tri_xy[None]  # [1,T,3,2]

@@ -57,6 +57,9 @@ class FakeField:
         p = torch.as_tensor(to_nav(np.asarray(points_scene)), dtype=torch.float32)
         return (p - self.goals[goal_index]).norm(dim=-1)
 
+    def raster(self):
+        return self  # the convex room's field is already O(1)
+
 
 class FakeNavMesh:
     up_axis = UP
@@ -139,7 +142,7 @@ def make_episodes():
     ]
 
 
-def make_env(B=2, config=None, episodes=None, seed=0, goal_images=None, **kw):
+def make_env(B=2, config=None, episodes=None, seed=0, goal_images=None, navmesh=None, **kw):
     from wanderland_nav.envs import NavEnv, NavEnvConfig
 
     if config is None:
@@ -148,5 +151,5 @@ def make_env(B=2, config=None, episodes=None, seed=0, goal_images=None, **kw):
         config.camera.history = 3
         config.instruction_length = 32
     return NavEnv(FakeScene(**kw), episodes if episodes is not None else make_episodes(), batch_size=[B],
-                  config=config, navmesh=FakeNavMesh(), gaussians=object(), renderer=FakeRenderer(), seed=seed,
+                  config=config, navmesh=navmesh or FakeNavMesh(), gaussians=object(), renderer=FakeRenderer(), seed=seed,
                   goal_images=goal_images)

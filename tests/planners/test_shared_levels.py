@@ -142,3 +142,12 @@ def test_undulating_terrain_fast(shared_data):
     d = _check_pairs(nm, 64, seed=12, n_paths=8)
     assert torch.isfinite(d).all()
     _check_lipschitz(nm, 300, seed=13)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", LEVELS)
+def test_level_raster_matches_exact_field(shared_data, name):
+    from test_raster import check_raster_against_exact
+
+    check_raster_against_exact(_bake(shared_data, name), n_points=2000, n_goals=8)
+

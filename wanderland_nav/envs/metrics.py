@@ -48,6 +48,7 @@ class EpisodeMetrics:
     serial: int = -1  # order in which the env started this episode since its last seed
     distance_to_goal: float = float("nan")  # geodesic (navmesh) distance from the end position to the goal
     nonfinite_actions: int = 0  # steps with a NaN/inf action (the agent stood still)
+    undefined_distance_steps: int = 0  # steps with no geodesic to the goal (NavEnv._step_distance's rule applied)
 
     def to_dict(self) -> dict:
         return asdict(self)

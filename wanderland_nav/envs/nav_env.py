@@ -8,8 +8,11 @@ agents:
     plan_motion (kinematics)  ->  NavMesh.move_along_surface  ->  distance field lookup
     -> rewards / terminations  ->  render the B cameras  ->  assemble observations
 
-Geodesic distances come from one `NavMesh.distance_field` over all (de-duplicated) episode goals,
-built at construction, so `d_t` is a table lookup per step. Episode-level metrics are accumulated
+Geodesic distances: the exact `NavMesh.distance_field` over all (de-duplicated) episode goals gives
+the start-goal lengths and rejects unreachable episodes at construction; per step, `d_t` comes
+from its O(1) raster (`planners.GeodesicRaster`: exact almost everywhere, never below the exact
+distance, at most 2 sqrt(2) cell sizes above it). A step whose distance is undefined (the agent on
+another island than its goal) keeps the last defined distance, can never succeed, and is counted. Episode-level metrics are accumulated
 per agent and handed out by `pop_finished_metrics()` for the trainer and the evaluator.
 
 State tensors are replaced, never written in place: the tensors returned in a step's TensorDict
@@ -18,8 +21,10 @@ may be kept by a rollout, and must not change afterwards.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
+import warnings
 from collections import defaultdict
 from typing import Sequence
 
@@ -28,6 +33,8 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
+
+from planners.threads import single_thread
 
 from wanderland_nav import keys
 from wanderland_nav.envs.camera import AgentCamera, Renderer
@@ -39,6 +46,22 @@ from wanderland_nav.envs.rewards import ProgressState, navigation_reward, termin
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
 log = logging.getLogger(__name__)
+
+
+def _one_thread_when_blind(method):
+    """Run a blind (camera-off) env call on one intra-op thread: all its work, TorchRL's included, is
+    small `[B]` tensor ops, which a thread pool only slows down, and on a loaded machine by
+    milliseconds per op (`planners/threads.py`). With the camera on, the renderer keeps the
+    caller's threads (the planners' queries still run on one: they switch themselves)."""
+
+    @functools.wraps(method)
+    def run(self, *args, **kwargs):
+        if self.config.camera.enabled:
+            return method(self, *args, **kwargs)
+        with single_thread():
+            return method(self, *args, **kwargs)
+
+    return run
 
 
 class NavEnv(EnvBase):
@@ -59,6 +82,10 @@ class NavEnv(EnvBase):
     """
 
     batch_locked = True
+    # TorchRL's entry points, its own bookkeeping included (tensordict copies, `where` on resets)
+    step = _one_thread_when_blind(EnvBase.step)
+    reset = _one_thread_when_blind(EnvBase.reset)
+    step_and_maybe_reset = _one_thread_when_blind(EnvBase.step_and_maybe_reset)
 
     def __init__(
         self,
@@ -95,17 +122,13 @@ class NavEnv(EnvBase):
         self.table = build_episode_table(
             self.episodes, scene, self.navmesh, instruction_length=cfg.instruction_length, where=where
         ).to(self.device)
-        self.field = self.navmesh.distance_field(self.table.field_goals_scene)
+        self.field = self.navmesh.distance_field(self.table.field_goals_scene)  # exact: lengths and checks
+        self.step_field = self.field.raster()  # O(1) per step, same goals
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
         self._init_goal_images(where, goal_images)
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
-        all_eps = torch.arange(len(self.table), device=self.device)
-        self.shortest_length = self._distance(self.table.start_position, all_eps)  # [E] geodesic start -> goal
-        bad = torch.nonzero(~torch.isfinite(self.shortest_length)).flatten()
-        if bad.numel():
-            i = int(bad[0])
-            raise ValueError(f"{where}: episodes[{i}] (id {self.table.ids[i]}): goal unreachable from the start on the navmesh")
+        self.shortest_length = self._shortest_lengths(where)  # [E] exact geodesic start -> goal
         self._make_specs()
         self._init_state()
         self.timings: dict[str, float] = defaultdict(float)
@@ -188,6 +211,8 @@ class NavEnv(EnvBase):
         self._progress = ProgressState(z(), z(dtype=torch.long), z(dtype=torch.long))
         self._path_len, self._collisions, self._nonfinite = z(), z(dtype=torch.long), z(dtype=torch.long)
         self._nonfinite_warned = False
+        self._undefined_steps = z(dtype=torch.long)  # steps whose geodesic distance was undefined
+        self._warned_undefined = False
         self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
         self._agent_goal_image = z(H, W, 3, dtype=torch.uint8)
         self._agent_has_goal_image = z(1, dtype=torch.bool)
@@ -232,7 +257,7 @@ class NavEnv(EnvBase):
         else:
             navigable = torch.ones_like(collided)
         t1 = time.perf_counter()
-        d_now = self._distance(end, self._ep)
+        d_now = self._step_distance(end)
         steps = self._steps + 1
         progress = update_progress(self._progress, d_now, collided, moved, cfg.termination)
         success, intervention, truncated = terminations(
@@ -315,6 +340,7 @@ class NavEnv(EnvBase):
         self._progress = ProgressState(put(p.best_distance, d0), put(p.steps_without_progress, zl), put(p.stuck_steps, zl))
         self._path_len, self._collisions = put(self._path_len, zl.float()), put(self._collisions, zl)
         self._nonfinite = put(self._nonfinite, zl)
+        self._undefined_steps = put(self._undefined_steps, zl)
         self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
         self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
         self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
@@ -337,6 +363,7 @@ class NavEnv(EnvBase):
                 "shortest": self.shortest_length[ep],
                 "collisions": self._collisions[idx],
                 "steps": self._steps[idx],
+                "undefined_distance_steps": self._undefined_steps[idx],
             }
         )
 
@@ -363,6 +390,7 @@ class NavEnv(EnvBase):
                     shortest_length=float(cols["shortest"][j]),
                     collisions=int(cols["collisions"][j]),
                     steps=int(cols["steps"][j]),
+                    undefined_distance_steps=int(cols["undefined_distance_steps"][j]),
                     environment=self.table.environment[e],
                     serial=int(cols["serial"][j]),
                     distance_to_goal=float(cols["distance_to_goal"][j]),
@@ -430,14 +458,46 @@ class NavEnv(EnvBase):
         ok = self.navmesh.is_navigable(self.nav_to_scene(p_nav).cpu())
         return torch.as_tensor(ok, dtype=torch.bool).reshape(-1).to(self.device)
 
-    def _distance(self, p_nav: torch.Tensor, ep: torch.Tensor) -> torch.Tensor:
-        """Geodesic distance `[n]` from nav-frame points `[n, 3]` to their episodes' goals.
+    def _shortest_lengths(self, where: str) -> torch.Tensor:
+        """Exact geodesic start -> goal `[E]`; an episode whose goal cannot be reached is refused."""
+        table = self.table
+        d = self.field.lookup(self.nav_to_scene(table.start_position).cpu(), table.goal_index.cpu())
+        d = torch.as_tensor(d, dtype=torch.float32).to(self.device)
+        bad = torch.nonzero(~torch.isfinite(d)).flatten()
+        if bad.numel():
+            i = int(bad[0])
+            raise ValueError(
+                f"{where}: episodes[{i}] (id {table.ids[i]}): goal unreachable from the start on the navmesh "
+                f"(start and goal on different islands; {bad.numel()} of {len(table)} episodes are)"
+            )
+        return d
 
-        Falls back to the straight-line distance where the field has no value (inf/NaN), so a
-        metric is always finite; the navmesh motion keeps agents on the goal's island anyway.
+    def _step_distance(self, p_nav: torch.Tensor) -> torch.Tensor:
+        """Geodesic distance `[B]` from the agents' nav-frame positions `[B, 3]` to their goals, per step.
+
+        Where it is undefined (the agent on another island than its goal: a navmesh sliver, a
+        motion bug), the rule is: keep the agent's last defined distance, raised to just above its
+        goal radius, so the step earns no progress reward and cannot be a success (success needs
+        a defined distance within the radius); the step is counted per episode
+        (`EpisodeMetrics.undefined_distance_steps`) and warned about once per env.
         """
-        g = self.field.lookup(self.nav_to_scene(p_nav).cpu(), self.table.goal_index[ep].cpu())
-        g = torch.as_tensor(g, dtype=torch.float32).to(self.device)
-        euclid = (self.table.goal_position[ep] - p_nav).norm(dim=-1)
-        return torch.where(torch.isfinite(g), g, euclid)
+        d = torch.as_tensor(self.step_field.lookup(self.nav_to_scene(p_nav).cpu(), self.table.goal_index[self._ep].cpu()),
+                            dtype=torch.float32).to(self.device)
+        undefined = ~torch.isfinite(d)
+        if not bool(undefined.any()):
+            return d
+        self._undefined_steps = self._undefined_steps + undefined.long()
+        if not self._warned_undefined:
+            self._warned_undefined = True
+            i = int(undefined.nonzero()[0, 0])
+            warnings.warn(
+                f"NavEnv: geodesic distance undefined for {int(undefined.sum())} agent(s) (first: agent {i}, episode "
+                f"id {self.table.ids[int(self._ep[i])]}, nav position {[round(v, 3) for v in p_nav[i].tolist()]}); kept "
+                f"their last distance, no success possible there; counted in undefined_distance_steps",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+        radius = self.table.goal_radius[self._ep]
+        keep = torch.maximum(self._dist, torch.nextafter(radius, torch.full_like(radius, float("inf"))))
+        return torch.where(undefined, keep, d)
 

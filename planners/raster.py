@@ -1,0 +1,170 @@
+"""O(1) geodesic distance to fixed goals: a per-goal raster of path *sources* over the navmesh spans.
+
+The env asks "how far is each agent from its goal" every step. The exact `GeodesicField.lookup`
+searches the visible corners per point (tens of microseconds per agent). This raster answers the
+same question with a constant number of array operations per agent:
+
+Build (once per goal): the navmesh already indexes which triangles overlap each raster cell
+(`col_tris`, its spatial index for point location). For every (cell, triangle) pair on the goal's
+island, a sample point `c` inside both (the triangle's point nearest the cell centre) gets its exact
+distance `d(c) = |c s| + d(s)` and its *source* `s`: the goal itself if `c` sees it, else the first
+corner its shortest path bends around. Stored: `s`, int32 per pair and goal. Keying by triangle,
+not by cell alone, keeps levels apart (stairs, a plaza over a street) and keeps the two sides of a
+thin wall apart: the simplified contours can bring two boundary edges within a few cm, so one cell
+can hold points 10 m apart along the surface (measured on the demo before this rule).
+
+Lookup of a point p: its triangle (the navmesh's point location) and column -> the pair's `s` ->
+`e(p) = |p s| + d(s)`, accepted only if p sees `s` (one visibility test: the angular fan of `s` on
+single-level islands, a triangle walk on islands with overlapping levels). Points on no triangle or
+that do not see their sample's source go to the exact field; nothing is interpolated across a wall.
+
+Error bound. Accepted answers are the length of a real path p -> s -> goal, so `e(p) >= d(p)`: a
+wall between p and its cell centre can never make the goal look nearer (no leak). And
+`|p s| <= |p c| + |c s|` gives `e(p) <= d(c) + |p c|`, while the geodesic is 1-Lipschitz:
+`d(c) <= d(p) + g(p, c)`. p and c lie in one (convex) triangle, so `g(p, c) = |p c|`, and both are
+within `cs / sqrt(2)` of the cell centre (c is the triangle's point nearest it), so
+
+    0 <= e(p) - d(p) <= 2 |p c| <= 2 sqrt(2) * cell_size,
+
+and `e(p) = d(p)` exactly whenever p's own shortest path starts at the same source as its cell
+centre's (almost everywhere: sources change only across the shadow lines of corners).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from planners.fields import GeodesicField
+from planners.threads import single_thread
+from planners.walk import closest_point_in_tri, walk
+
+_BUILD_CHUNK = 1024  # samples per exact query while building (bounds the [R, 3S] float64 work arrays: ~10 MB each)
+
+
+class GeodesicRaster:
+    """Distances to the goals of a `GeodesicField`; `lookup(points[B,3], goal_index[B]) -> [B]`.
+
+    `stats` counts queries and how many fell back to the exact field (`exact_fallbacks`)."""
+
+    def __init__(self, field: GeodesicField):
+        t0 = time.perf_counter()
+        self.field = field
+        nm = self.nm = field.nm
+        f = field._np
+        self._M = f["M"]
+        self._src_xy = np.stack([f["src_x"], f["src_y"]], 1)  # [M+G, 2] corners, then goals (local)
+        self._c2g = np.concatenate([field.corner_to_goal.numpy(), np.zeros((len(field), 1))], 1)  # [G, M+1]
+        self._tol = max(0.5, nm.settings.agent_max_climb)  # m: as the navmesh's own point location
+        with single_thread():
+            self._pair_id, samples = self._samples()  # [ncols, K], [P, 3]
+            self.source = self._build_sources(samples)  # [G, P] int32
+        self.build_seconds = time.perf_counter() - t0
+        self.stats = {"queries": 0, "exact_fallbacks": 0}
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the rasters: per-goal sources plus the shared (cell, triangle) index (bytes)."""
+        return int(self.source.nbytes + self._pair_id.nbytes)
+
+    def __len__(self) -> int:
+        return len(self.field)
+
+    def _samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """One sample point per (cell, triangle) overlap: the triangle's point nearest the cell centre,
+        nudged inside it. -> (pair_id `[ncols, K]` int64 into the samples (-1 none), samples `[P, 3]` local)."""
+        nm, t = self.nm, self.nm._t
+        c, k = np.nonzero(nm.col_tris >= 0)
+        tri = torch.from_numpy(nm.col_tris[c, k].astype(np.int64))
+        pair_id = np.full(nm.col_tris.shape, -1, dtype=np.int64)
+        pair_id[c, k] = np.arange(c.shape[0])
+        centre = torch.from_numpy(np.stack([(c % nm.width + 0.5) * nm.cs, (c // nm.width + 0.5) * nm.cs], 1))
+        xy = closest_point_in_tri(t["tri_xy"][tri], centre)
+        z = nm.surface_z(tri, xy)
+        return pair_id, torch.cat([xy, z[:, None]], 1).numpy()
+
+    def _build_sources(self, samples: np.ndarray) -> np.ndarray:
+        """`[G, P]` source of every sample for every goal (-1: other island or apart)."""
+        nm, field = self.nm, self.field
+        out = np.full((len(field), samples.shape[0]), -1, dtype=np.int32)
+        c, k = np.nonzero(self._pair_id >= 0)
+        pair_island = nm.tri_island[nm.col_tris[c, k]]  # [P], in pair order
+        goal_island = field.goal_island.numpy()
+        for g in range(len(field)):  # per goal: its island's samples, in chunks
+            rows = np.flatnonzero(pair_island == goal_island[g])
+            for j in range(0, rows.shape[0], _BUILD_CHUNK):
+                r = rows[j:j + _BUILD_CHUNK]
+                out[g, r] = field.query_local(samples[r], np.full(r.shape[0], g, dtype=np.int64))[1]
+        return out
+
+    def lookup(self, points, goal_index) -> torch.Tensor:
+        """Geodesic (horizontal) distance `[B]` float32 from scene-frame points[B,3] to goals goal_index[B];
+        inf where the point is on another island than its goal (as `GeodesicField.lookup`)."""
+        p = torch.as_tensor(points).detach().cpu().reshape(-1, 3).double().numpy()
+        gi = torch.as_tensor(goal_index).cpu().reshape(-1).numpy().astype(np.int64)
+        if gi.shape[0] != p.shape[0]:
+            raise ValueError(f"GeodesicRaster.lookup: {p.shape[0]} points but {gi.shape[0]} goal indices")
+        f = self.field._np
+        with single_thread():
+            d = self._lookup_local(p @ f["R_T"] - f["bmin"], gi)  # local nav frame [B, 3]
+        return torch.from_numpy(d.astype(np.float32))
+
+    def _lookup_local(self, loc: np.ndarray, gi: np.ndarray) -> np.ndarray:
+        pair = self._pair_of(loc)
+        s = np.where(pair >= 0, self.source[gi, np.maximum(pair, 0)], -1).astype(np.int64)
+        ok = s >= 0
+        comb = np.where(s == self._M, self._M + gi, s)  # combined source id: corner m, or goal M + g
+        comb[~ok] = 0
+        sxy = self._src_xy[comb]
+        d = np.hypot(loc[:, 0] - sxy[:, 0], loc[:, 1] - sxy[:, 1]) + self._c2g[gi, np.where(ok, s, 0)]
+        rows = np.flatnonzero(ok)
+        ok[rows] = self._sees(loc[rows], gi[rows], comb[rows])
+        exact = np.flatnonzero(~ok)
+        if exact.shape[0]:  # off the triangles, another island (the exact field's island rule decides),
+            # or the sample's source hidden from p
+            d[exact] = self.field.query_local(loc[exact], gi[exact])[0]
+        self.stats["queries"] += loc.shape[0]
+        self.stats["exact_fallbacks"] += int(exact.shape[0])
+        return d
+
+    def _pair_of(self, loc: np.ndarray) -> np.ndarray:
+        """(cell, triangle) sample `[B]` of local points: the triangle holding p at its level (the
+        navmesh's point location) in p's column; -1 where p is on no triangle."""
+        nm = self.nm
+        tri = nm._locate_local(torch.from_numpy(loc), self._tol).numpy()
+        ix = np.floor(loc[:, 0] / nm.cs).astype(np.int64)
+        iy = np.floor(loc[:, 1] / nm.cs).astype(np.int64)
+        ing = (ix >= 0) & (iy >= 0) & (ix < nm.width) & (iy < nm.height) & (tri >= 0)
+        col = np.where(ing, ix + iy * nm.width, 0)
+        slot = nm.col_tris[col] == tri[:, None]  # [B, K]
+        pair = self._pair_id[col, slot.argmax(1)]
+        return np.where(ing & slot.any(1), pair, -1)
+
+    def _sees(self, loc: np.ndarray, gi: np.ndarray, comb: np.ndarray) -> np.ndarray:
+        """Whether each point sees its combined source: the source's visibility fan on single-level
+        islands, a triangle walk on islands with overlapping levels (or corners lacking a fan)."""
+        seen = np.zeros(loc.shape[0], dtype=bool)
+        simple = self.field._goal_simple_np[gi]
+        r = np.flatnonzero(simple)
+        if r.shape[0]:
+            seen[r] = self.field._sees(comb[r], loc[r, 0], loc[r, 1])
+        r = np.flatnonzero(~simple)
+        if r.shape[0]:
+            seen[r] = self._walk_sees(loc[r], gi[r], comb[r])
+        return seen
+
+    def _walk_sees(self, loc: np.ndarray, gi: np.ndarray, comb: np.ndarray) -> np.ndarray:
+        """Line of sight along the surface from p to the source: the walk reaches the source's own
+        triangle (not the same xy on another level)."""
+        nm, t = self.nm, self.nm._t
+        lt = torch.from_numpy(loc)
+        tri = nm._locate_local(lt, self._tol)
+        found = tri >= 0
+        is_goal = torch.from_numpy(comb >= self._M)
+        corner = torch.from_numpy(np.minimum(comb, max(self._M - 1, 0)))
+        goal = torch.from_numpy(gi)
+        src_tri = torch.where(is_goal, self.field.goal_tri[goal], t["node_tri"][corner] if self._M else -1)
+        r = walk(t["tri_xy"], t["nbr"], tri.clamp_min(0), lt[:, :2], torch.from_numpy(self._src_xy[comb]))
+        return (found & r.reached & (r.tri == src_tri)).numpy()
