@@ -102,6 +102,14 @@ def dataclass_from(cls, d) -> object:
     return cls(**d)
 
 
+def ray_options(collector: DictConfig) -> dict | None:
+    """`collector=ray`'s options for `make_collector` (None for the local single/multi collectors)."""
+    if collector.get("kind", "local") != "ray":
+        return None
+    c = OmegaConf.to_container(collector, resolve=True)
+    return {k: c[k] for k in ("address", "cpus_per_worker", "memory_per_worker_gb") if k in c}
+
+
 # ------------------------------------------------------------------------------------------ run
 def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Path, logger, step: int) -> None:
     from wanderland_nav.envs.evaluation import run_evaluation
@@ -207,7 +215,7 @@ def run(cfg: DictConfig) -> dict:
         ppo_cfg = dataclass_from(PPOConfig, cfg.algo.ppo)
         trainer = PPOTrainer(policy, env_fn, ppo_cfg, logger=logger, checkpointer=ckpt,
                              num_workers=int(cfg.collector.num_workers), seed=seed, config_dict=config_dict,
-                             progress=bool(cfg.progress))
+                             progress=bool(cfg.progress), ray=ray_options(cfg.collector))
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)
