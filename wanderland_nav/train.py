@@ -118,7 +118,12 @@ def _evaluate(name: str, policy, eval_env, cfg, results: dict, results_path: Pat
     t = time.perf_counter()
     actor = PolicyActor(policy, bool(cfg.eval.deterministic))
     save_dir, wants = cfg.get("save_rollouts"), bool(getattr(logger, "wants_rollouts", False))
-    if save_dir or wants:  # rollout file (+save_rollouts=<dir>) and/or renders for logger=rerun
+    if hasattr(eval_env, "scene_paths"):  # a scene set: rows overall, indoor/outdoor and per scene
+        if save_dir or wants:
+            log.warning("eval %s: rollouts are recorded for single scenes only, not for a scene set", name)
+        res = eval_env.run(actor, cfg.eval.episodes, seed=int(cfg.seed), name=name, progress=bool(cfg.progress))
+        log.info("eval %s per scene:\n%s", name, res.table)
+    elif save_dir or wants:  # rollout file (+save_rollouts=<dir>) and/or renders for logger=rerun
         from wanderland_nav.rollouts import record_evaluation
 
         path = Path(save_dir) / f"{name.replace('+', '_')}.npz" if save_dir else None
@@ -150,19 +155,31 @@ def run(cfg: DictConfig) -> dict:
     logger_kw = {k: v for k, v in OmegaConf.to_container(cfg.logger, resolve=True).items() if k != "kind"}
     logger = make_logger(str(cfg.logger.kind), run_dir, **logger_kw)
 
-    scene, episodes_path = resolve_scene(cfg)
+    from wanderland_nav.scene.sets import scene_set_from_config
+
+    scene_set = scene_set_from_config(cfg.scene)  # None: a single scene
+    if scene_set is None:
+        scene, episodes_path = resolve_scene(cfg)
     name, kw = policy_kwargs(cfg)
     policy = make_policy(name, **kw).to(cfg.device)
     render_size = cfg.render.get("image_size")
     env_cfg = shaped_env_config(OmegaConf.to_container(cfg.env, resolve=True), policy,
                                 tuple(render_size) if render_size else None)
     seed, device = int(cfg.seed), str(cfg.device)
-    gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)
-    eval_env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,
-                            episodes_path=episodes_path, split=cfg.eval.split, seed=seed, gaussians=gaussians)
-    env_fn = partial(make_nav_env, str(scene.root), config=env_cfg, batch_size=int(cfg.train_env.batch_size),
-                     device=device, episodes_path=episodes_path, split=cfg.train_env.split, seed=seed,
-                     gaussians=gaussians)
+    if scene_set is not None:  # many scenes: wanderland_nav/envs/scene_set_env.py
+        from wanderland_nav.envs.scene_set_env import envs_from_config
+        from wanderland_nav.scene import load_scene
+
+        paths, eval_env, env_fn, bc_env_fn = envs_from_config(cfg, scene_set, env_cfg, seed, device)
+        scene = load_scene(next(iter(paths.values())))
+    else:
+        gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)
+        eval_env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.eval.batch_size), device=device,
+                                episodes_path=episodes_path, split=cfg.eval.split, seed=seed, gaussians=gaussians)
+        env_fn = partial(make_nav_env, str(scene.root), config=env_cfg, batch_size=int(cfg.train_env.batch_size),
+                         device=device, episodes_path=episodes_path, split=cfg.train_env.split, seed=seed,
+                         gaussians=gaussians)
+        bc_env_fn = env_fn
 
     ckpt = Checkpointer(run_dir / "checkpoints")
     state = ckpt.resume()
@@ -196,7 +213,7 @@ def run(cfg: DictConfig) -> dict:
             policy.load_state_dict(state["policy"])
             log.info("BC already done; loaded its weights")
         else:
-            train_env = env_fn()
+            train_env = bc_env_fn()
             paths = ExpertPaths.from_episodes(train_env.episodes, scene.nav_from_scene)
             stats = train_bc(policy, train_env, paths, dataclass_from(BCConfig, cfg.algo.bc), logger=logger,
                              seed=seed, progress=bool(cfg.progress))

@@ -112,3 +112,19 @@ def test_bad_layout_is_refused():
         multi(B=3, num_active=2)
     with pytest.raises(ValueError, match=r"num_active=4 must be in \[1, 3\]"):
         multi(B=4, num_active=4)
+
+
+def test_seeding_after_reset_keeps_scenes_bound_and_same_seed_same_first_batch():
+    env = multi(B=4, num_active=2, seed=0)
+    env.reset()
+    env.set_seed(3)  # what a collector does after its first reset
+    td = env.reset(TensorDict({keys.RESET: torch.zeros(4, 1, dtype=torch.bool)}, batch_size=[4]))
+    td.set(keys.ACTION, env.action_spec.zero())
+    env.step(td)  # every slot still bound
+    firsts = []
+    for _ in range(2):
+        env.set_seed(5)
+        td = env.reset()
+        firsts.append((list(env.active), td[keys.EPISODE_INDEX].clone(), td[keys.AGENT_POSITION].clone()))
+    assert firsts[0][0] == firsts[1][0]
+    assert torch.equal(firsts[0][1], firsts[1][1]) and torch.equal(firsts[0][2], firsts[1][2])

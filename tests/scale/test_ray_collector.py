@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -11,17 +12,6 @@ import torch
 from wanderland_nav.train import ray_options
 
 TESTS = Path(__file__).resolve().parents[1]
-
-
-class RowLogger:
-    def __init__(self):
-        self.rows = []
-
-    def log_scalars(self, scalars, step):
-        self.rows.append((step, dict(scalars)))
-
-    def log_rollout(self, rollout, step, tag="eval"):
-        pass
 
 
 def test_ray_options_come_from_the_collector_group():
@@ -44,19 +34,19 @@ def test_frames_must_split_over_workers():
 @pytest.mark.slow  # ~35 s idle, 145 s at load 13 (Ray start + 2 actors importing torch): over the default budget
 def test_two_ray_workers_run_ppo_iterations(tmp_path):
     ray = pytest.importorskip("ray")
-    from rl.fake_env import FakeNavEnv
+    sys.path.insert(0, str(TESTS / "rl"))  # the PPO tests' fake env, policy and logger
+    from fake_env import FakeNavEnv
+    from test_ppo import ListLogger, tiny_policy
 
-    from policies import make_policy
     from wanderland_nav.rl.checkpoint import Checkpointer
     from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
 
-    path = os.pathsep.join([str(TESTS), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])
+    path = os.pathsep.join([str(TESTS / "rl"), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
              runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
     try:
-        log = RowLogger()
-        torch.manual_seed(0)
-        policy = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
+        log = ListLogger()
+        policy = tiny_policy()
         before = [p.detach().clone() for p in policy.parameters()]
         cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1)
         t = PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=log, checkpointer=Checkpointer(tmp_path),

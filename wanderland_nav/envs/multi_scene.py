@@ -154,7 +154,7 @@ class MultiSceneNavEnv(EnvBase):
         self._make_scene_env = make_scene_env
         self._finished: dict[str, list[EpisodeMetrics]] = {}
         self.cache = SceneLRU(self._load, memory_budget_bytes, on_evict=lambda k, env: self._stash_metrics(k, env))
-        self.active: list[str | None] = [None] * self.num_active
+        self.active: list[str | None] = [None] * self.num_active  # scene id bound to each slot
         self.history: list[tuple[int, str]] = []  # (slot, scene_id) per binding, in order
         self.set_seed(seed)
         self._make_specs(self.cache.get(self.scene_ids[0]))
@@ -179,7 +179,8 @@ class MultiSceneNavEnv(EnvBase):
         sid = self._next_scene(slot)
         self.active[slot] = sid
         env = self.cache.get(sid, pinned=[s for s in self.active if s is not None])
-        env.set_seed(self._seed * 1_000_003 + len(self.history))
+        env.set_seed(self._seed * 1_000_003 + self._draws)
+        self._draws += 1
         self.history.append((slot, sid))
         return env
 
@@ -202,10 +203,15 @@ class MultiSceneNavEnv(EnvBase):
     # ------------------------------------------------------------------ TorchRL API
 
     def _set_seed(self, seed: int | None) -> None:
+        """Restart the schedule; scenes already bound stay bound (a collector seeds after its first reset)
+        and are reseeded, and the next full reset deals from the restarted queue."""
         self._seed = 0 if seed is None else int(seed)
         self._rng = torch.Generator().manual_seed(self._seed)
         self._queue: list[str] = []
-        self.active = [None] * self.num_active
+        self._draws = 0
+        for slot, sid in enumerate(self.active):
+            if sid is not None:
+                self.cache.items[sid].set_seed(self._seed * 1_000_003 - 1 - slot)
 
     def _slot_scene_index(self) -> torch.Tensor:
         idx = [self.scene_ids.index(s) for s in self.active]
@@ -214,6 +220,8 @@ class MultiSceneNavEnv(EnvBase):
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None if tensordict is None else tensordict.get(keys.RESET, None)
         b, outs = self.sub_batch, []
+        if mask is None:  # a full reset rebinds every slot from the queue
+            self.active = [None] * self.num_active
         for slot in range(self.num_active):
             m = None if mask is None else mask.reshape(-1)[slot * b:(slot + 1) * b]
             if self.active[slot] is None or m is None or bool(m.all()):

@@ -42,6 +42,7 @@ class SceneJob:
     demo_seed: int | None = None  # a procedural demo scene to build first
     demo_preset: str = "tiny"
     expert: bool = True
+    goal_images: bool = True  # rendered goal views (seconds each on a CPU); point-goal training needs none
 
     def settings_hash(self) -> str:
         d = {k: v for k, v in asdict(self).items() if k not in ("scene_id", "path")}
@@ -71,11 +72,11 @@ def prepare_one(job: SceneJob) -> dict:
     out = {"prepare_s": time.perf_counter() - t0}
     if job.expert:
         from planners import NavMesh
-        from wanderland_nav.episodes.generate import write_scene_episodes
+        from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
 
         episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
-                                                 Path(scene.root) / "episodes.json",
-                                                 num_episodes=job.num_episodes, seed=job.seed)
+                                                 Path(scene.root) / "episodes.json", num_episodes=job.num_episodes,
+                                                 seed=job.seed, settings=GeneratorSettings(goal_images=job.goal_images))
         out.update(episodes=len(episodes), expert_skipped=bool(summary.skipped))
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -97,10 +98,11 @@ class BatchReport:
         return "\n".join(lines)
 
 
-def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0, expert: bool = True) -> list[SceneJob]:
+def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0, expert: bool = True,
+             goal_images: bool = True) -> list[SceneJob]:
     seeds = scene_set.demo.get("seeds") or [None] * len(scene_set)
-    return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), expert)
-            for e, s in zip(scene_set.entries, seeds)]
+    return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), expert,
+                     goal_images) for e, s in zip(scene_set.entries, seeds)]
 
 
 def _read_manifest(path: Path) -> dict:
@@ -210,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--demo-root", default="data/scenes/demo_set")
     p.add_argument("--episodes", type=int, default=100), p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-expert", action="store_true"), p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--no-goal-images", action="store_true")
     p.add_argument("--backend", default="auto", choices=["auto", "ray", "process", "serial"])
     p.add_argument("--manifest", help="done-manifest JSON (default: <set folder>/prepare_done.json)")
     a = p.parse_args(argv)
@@ -220,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         s = load_scene_set(a.scenes, data_root=a.data_root, tiers=a.tiers, split=a.split)
         src = Path(a.scenes)
         default_manifest = (src if src.is_dir() else src.parent) / f"{src.stem}_prepare_done.json"
-    jobs = jobs_for(s, num_episodes=a.episodes, seed=a.seed, expert=not a.no_expert)
+    jobs = jobs_for(s, num_episodes=a.episodes, seed=a.seed, expert=not a.no_expert, goal_images=not a.no_goal_images)
     report = run_batch(jobs, a.manifest or default_manifest, workers=a.workers, backend=a.backend)
     print(report.format())
     return 1 if report.failed else 0
