@@ -209,9 +209,10 @@ class MultiSceneNavEnv(EnvBase):
         self._rng = torch.Generator().manual_seed(self._seed)
         self._queue: list[str] = []
         self._draws = 0
-        for slot, sid in enumerate(self.active):
+        for sid in self.active:
             if sid is not None:
-                self.cache.items[sid].set_seed(self._seed * 1_000_003 - 1 - slot)
+                self.cache.items[sid].set_seed(self._seed * 1_000_003 + self._draws)
+                self._draws += 1
 
     def _slot_scene_index(self) -> torch.Tensor:
         idx = [self.scene_ids.index(s) for s in self.active]

@@ -87,6 +87,9 @@ class SceneSetEvaluation:
         summary = aggregate_by_scene(by_scene)
         return EvaluationResult(records, summary, format_table({f"{name}/{g}": r for g, r in summary.items()}))
 
+    def close(self) -> None:
+        """Nothing to release: each scene's env is built for one run and closed after it."""
+
 
 def default_num_active(batch_size: int, num_scenes: int) -> int:
     """The most scenes stepped at once that split `batch_size` evenly (at most `num_scenes`)."""
