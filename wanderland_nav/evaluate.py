@@ -82,6 +82,30 @@ def run_checkpoints(cfg: DictConfig):
     return rows
 
 
+def run_scene_set(cfg: DictConfig, env_cfg: NavEnvConfig, policy_cfg: dict) -> EvaluationResult:
+    """`scene=demo_set` (or any `scene.set`): every scene's split, one table with a row per scene."""
+    from functools import partial
+
+    from wanderland_nav.envs.scene_set_env import SceneSetEvaluation, prepare_scene_set
+    from wanderland_nav.scene.sets import scene_set_from_config
+
+    scene_set = scene_set_from_config(cfg.scene)
+    root = Path(cfg.scene.set.get("root") or Path(str(cfg.scene.set.manifest)).parent)
+    paths = prepare_scene_set(scene_set, root / "prepare_done.json", num_episodes=int(cfg.demo_episodes),
+                              seed=int(cfg.seed), goal_images=bool(policy_cfg.get("needs_images", True)))
+    policy = partial(resolve_policy, policy_cfg)
+    policy.per_env = True  # the references read their env (expert paths, action spec)
+    name = str(policy_cfg["name"])
+    res = SceneSetEvaluation(paths, env_cfg, int(cfg.batch_size), cfg.split, str(cfg.device)).run(
+        policy, cfg.num_episodes, seed=int(cfg.seed), name=name, progress=bool(cfg.progress))
+    print(f"{scene_set.source}: {len(paths)} scenes, {len(res.records)} episodes (split {cfg.split}), policy {name}")
+    print(res.table, flush=True)
+    out = Path(cfg.out) if cfg.out is not None else _hydra_output_dir()
+    write_results(out, name, res, meta={"scenes": paths, "split": cfg.split, "policy": policy_cfg,
+                                        "env": env_cfg.to_dict(), "seed": int(cfg.seed)})
+    return res
+
+
 def run(cfg: DictConfig) -> EvaluationResult:
     """Everything `main` does, callable with a composed config (tests)."""
     if cfg.get("checkpoints"):
@@ -92,6 +116,8 @@ def run(cfg: DictConfig) -> EvaluationResult:
         env_cfg.camera.enabled = False  # the built-in references never look: skip the renderer
         env_cfg.camera.width = env_cfg.camera.height = 8  # and keep the (all-zero) frames small
         print(f"policy {policy_cfg.get('name')} does not read images: rendering is off (policy.needs_images=true)")
+    if cfg.scene_path is None and cfg.scene.get("set"):  # a scene set: rows overall, indoor/outdoor, per scene
+        return run_scene_set(cfg, env_cfg, policy_cfg)
     scene, episodes = resolve_scene(cfg)
     env = make_nav_env(scene, config=env_cfg, batch_size=int(cfg.batch_size), device=str(cfg.device),
                        episodes_path=episodes, split=cfg.split, seed=int(cfg.seed))

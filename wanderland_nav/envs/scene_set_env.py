@@ -25,17 +25,23 @@ log = logging.getLogger(__name__)
 
 def prepare_scene_set(scene_set, done_manifest: str | Path, *, num_episodes: int, seed: int, goal_images: bool,
                       workers: int = 2, backend: str = "process") -> dict[str, str]:
-    """Make every scene of the set ready (resumably); returns `{scene_id: folder}` of the ready ones."""
+    """Make the scenes of the set that have no `episodes.json` yet (resumably; like the single-scene entry
+    points, existing episodes are used as they are); returns `{scene_id: folder}` of the ready ones."""
     from wanderland_nav.scene.batch import jobs_for, run_batch
 
-    jobs = jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images)
-    report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
-    log.info("scene set: %s", report.format())
-    if report.failed:
-        log.warning("scene set: %d scene(s) left out after failing: %s", len(report.failed), sorted(report.failed))
-    ready = {e.scene_id: str(e.path) for e in scene_set if e.scene_id in report.done}
+    jobs = [j for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images)
+            if not (Path(j.path) / "episodes.json").is_file()]
+    failed = {}
+    if jobs:
+        report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
+        log.info("scene set: %s", report.format())
+        failed = report.failed
+    if failed:
+        log.warning("scene set: %d scene(s) left out after failing: %s", len(failed), sorted(failed))
+    ready = {e.scene_id: str(e.path) for e in scene_set
+             if e.scene_id not in failed and (e.path / "episodes.json").is_file()}
     if not ready:
-        raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared:\n{report.format()}")
+        raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared: {failed}")
     return ready
 
 
@@ -75,12 +81,15 @@ class SceneSetEvaluation:
 
     def run(self, policy, num_episodes: int | None = None, *, seed: int = 0, name: str = "policy",
             progress: bool = False) -> EvaluationResult:
+        """`policy`: a TensorDict -> TensorDict callable, or a `NavEnv -> policy` factory flagged with
+        `policy.per_env = True` (references such as the expert read their env)."""
         by_scene: dict[str, list[EpisodeMetrics]] = {}
         records = []
         for sid in self.scene_paths:
             env = scene_env(self.scene_paths, self.config, self.split, self.device, self.max_gaussians, sid,
                             self.batch_size, seed)
-            res = run_evaluation(env, policy, num_episodes, seed=seed, name=f"{name}/{sid}", progress=progress)
+            actor = policy(env) if getattr(policy, "per_env", False) else policy
+            res = run_evaluation(env, actor, num_episodes, seed=seed, name=f"{name}/{sid}", progress=progress)
             env.close()
             by_scene[sid] = [EpisodeMetrics(**r) for r in res.records]
             records += [{**r, "scene_id": sid} for r in res.records]
