@@ -86,12 +86,12 @@ def run_scene_set(cfg: DictConfig, env_cfg: NavEnvConfig, policy_cfg: dict) -> E
     """`scene=demo_set` (or any `scene.set`): every scene's split, one table with a row per scene."""
     from functools import partial
 
-    from wanderland_nav.envs.scene_set_env import SceneSetEvaluation, prepare_scene_set
+    from wanderland_nav.prepare_set import prepare_scene_set, set_root
+    from wanderland_nav.rl.scene_sets import SceneSetEvaluation
     from wanderland_nav.scene.sets import scene_set_from_config
 
     scene_set = scene_set_from_config(cfg.scene)
-    root = Path(cfg.scene.set.get("root") or Path(str(cfg.scene.set.manifest)).parent)
-    paths = prepare_scene_set(scene_set, root / "prepare_done.json", num_episodes=int(cfg.demo_episodes),
+    paths = prepare_scene_set(scene_set, set_root(cfg.scene) / "prepare_done.json", num_episodes=int(cfg.demo_episodes),
                               seed=int(cfg.seed), goal_images=bool(policy_cfg.get("needs_images", True)))
     policy = partial(resolve_policy, policy_cfg)
     policy.per_env = True  # the references read their env (expert paths, action spec)

@@ -166,11 +166,15 @@ def run(cfg: DictConfig) -> dict:
     env_cfg = shaped_env_config(OmegaConf.to_container(cfg.env, resolve=True), policy,
                                 tuple(render_size) if render_size else None)
     seed, device = int(cfg.seed), str(cfg.device)
-    if scene_set is not None:  # many scenes: wanderland_nav/envs/scene_set_env.py
-        from wanderland_nav.envs.scene_set_env import envs_from_config
+    if scene_set is not None:  # many scenes: wanderland_nav/prepare_set.py, wanderland_nav/rl/scene_sets.py
+        from wanderland_nav.prepare_set import prepare_scene_set, set_root
+        from wanderland_nav.rl.scene_sets import envs_from_config
         from wanderland_nav.scene import load_scene
 
-        paths, eval_env, env_fn, bc_env_fn = envs_from_config(cfg, scene_set, env_cfg, seed, device)
+        paths = prepare_scene_set(scene_set, set_root(cfg.scene) / "prepare_done.json",
+                                  num_episodes=int(cfg.episodes.num), seed=int(cfg.episodes.seed), goal_images=bool(cfg.episodes.goal_images),
+                                  workers=int(cfg.scene.set.get("prepare_workers") or 2))
+        eval_env, env_fn, bc_env_fn = envs_from_config(cfg, paths, env_cfg, seed, device)
         scene = load_scene(next(iter(paths.values())))
     else:
         gaussians = lod_gaussians(scene.gaussians_path, cfg.render.max_gaussians)

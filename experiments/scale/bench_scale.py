@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 1 2 4
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 2 --ray
 
-The scenes are a prepared demo set (`python -m wanderland_nav.scene.batch demo_set --demo-root <dir>`).
+The scenes are a prepared demo set (`python -m wanderland_nav.prepare_set demo_set --demo-root <dir>`).
 Collection: the CityWalker-style demo policy (32 px, 10k LOD Gaussians) acting in a MultiSceneNavEnv
 (B=4 agents per worker, 2 scenes active) through `make_collector` (1 worker: `Collector` in-process;
 N > 1: `MultiSyncCollector` of N processes; `--ray`: `RayCollector` of N actors); frames/s is measured
@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from policies import make_policy  # noqa: E402
 from wanderland_nav.envs.multi_scene import measure_bytes  # noqa: E402
-from wanderland_nav.envs.scene_set_env import make_multi_scene_env, scene_env  # noqa: E402
+from wanderland_nav.rl.scene_sets import make_multi_scene_env, scene_env  # noqa: E402
 from wanderland_nav.rl.policy_env import shaped_env_config  # noqa: E402
 from wanderland_nav.rl.ppo import make_actor, make_collector  # noqa: E402
 from wanderland_nav.scene.sets import load_scene_set  # noqa: E402

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from wanderland_nav.scene.batch import SceneJob, jobs_for, prepare_one, run_batch
+from wanderland_nav.prepare_set import SceneJob, jobs_for, prepare_one, run_batch
 from wanderland_nav.scene.sets import demo_scene_set
 
 
@@ -59,7 +59,8 @@ def test_bad_manifest_is_named(tmp_path):
 
 def test_demo_set_jobs_carry_their_seeds(tmp_path):
     js = jobs_for(demo_scene_set(tmp_path, seeds=[3, 5]), num_episodes=4)
-    assert [(j.scene_id, j.demo_seed, j.demo_preset) for j in js] == [("demo_seed_3", 3, "tiny"), ("demo_seed_5", 5, "tiny")]
+    assert [(j.scene_id, j.demo_seed, j.demo_preset) for j in js] == [("demo_seed_3", 3, "tiny"),
+                                                                      ("demo_seed_5", 5, "tiny")]
 
 
 def test_ray_backend_collects_failures(tmp_path):

@@ -1,4 +1,5 @@
-"""scene=<set> through the evaluate entry point: scenes built and prepared on demand, a row per scene (slow: builds 2 demo seeds)."""
+"""scene=<set> through the evaluate entry point: scenes built and prepared on demand, a row per scene
+(slow: builds 2 demo seeds)."""
 
 from __future__ import annotations
 

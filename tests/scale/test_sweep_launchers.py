@@ -19,5 +19,6 @@ def test_submitit_slurm_launcher_is_selectable_and_jobs_keep_their_run_dirs():
     launcher = cfgs[0].hydra.launcher
     assert launcher._target_ == "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
     assert launcher.timeout_min == 240
-    assert [c.run_dir for c in cfgs] == ["outputs/citywalker_rl/seed_0", "outputs/citywalker_rl/seed_1"]  # resume per job
+    # each job resumes from its own run dir
+    assert [c.run_dir for c in cfgs] == ["outputs/citywalker_rl/seed_0", "outputs/citywalker_rl/seed_1"]
     assert cfgs[0].collector.kind == "ray" and list(cfgs[0].scene.set.seeds) == [0, 1, 2]

@@ -10,7 +10,7 @@ A manifest is one of
     training_ready), optional `manifest_version`, `data_path` (relative to the data root) and `split`.
 
 Sets filter by quality tier and split (`SceneSet.filter`). Scene folders are not read here: a set
-may name scenes that are still to be built (the demo set) or prepared (`wanderland_nav.scene.batch`);
+may name scenes that are still to be built (the demo set) or prepared (`wanderland_nav.prepare_set`);
 `SceneSet.missing()` lists them. Bad rows fail with the file and line named.
 """
 
@@ -154,7 +154,8 @@ def scene_set_from_csv(csv_file: str | Path, data_root: str | Path | None = None
             if tier not in TIERS:
                 raise ManifestError(f"{loc}: quality_tier {tier!r} not in {list(TIERS)}")
             rel = (row.get("data_path") or "").strip() or sid
-            entries.append(SceneEntry(sid, root / rel, quality_tier=tier, split=(row.get("split") or "").strip() or None,
+            split = (row.get("split") or "").strip() or None
+            entries.append(SceneEntry(sid, root / rel, quality_tier=tier, split=split,
                                       manifest_version=(row.get("manifest_version") or "").strip() or None))
             where.append(loc)
     if not entries:

@@ -1,4 +1,4 @@
-"""Prepare + expert over a scene set in parallel, resumably: `python -m wanderland_nav.scene.batch <set>`.
+"""Prepare + expert over a scene set in parallel, resumably: `python -m wanderland_nav.prepare_set <set>`.
 
 Each scene is one task: build it if it is a demo seed, `prepare_scene` (collision mesh, navmesh) and
 `write_scene_episodes` (expert episodes). Tasks run as Ray tasks when `ray` is importable and a cluster
@@ -113,7 +113,8 @@ def _read_manifest(path: Path) -> dict:
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: done-manifest is not JSON ({e}); delete it to start over") from e
     if m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("done"), dict):
-        raise ValueError(f"{path}: field 'format' must be {MANIFEST_FORMAT} with a 'done' object; delete it to start over")
+        raise ValueError(f"{path}: field 'format' must be {MANIFEST_FORMAT} with a 'done' object; "
+                         "delete it to start over")
     return m
 
 
@@ -144,7 +145,8 @@ def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int =
 
     def finished(job: SceneJob, result: dict | None, error: str | None) -> None:
         if error is None:
-            manifest["done"][job.scene_id] = report.done[job.scene_id] = {**result, "settings_hash": job.settings_hash()}
+            entry = {**result, "settings_hash": job.settings_hash()}
+            manifest["done"][job.scene_id] = report.done[job.scene_id] = entry
             manifest["failed"].pop(job.scene_id, None)
         else:
             manifest["failed"][job.scene_id] = report.failed[job.scene_id] = error
@@ -202,6 +204,32 @@ def _run_ray(todo, fn, workers, finished) -> None:
             finished(job, *ray.get(ready[0]))
         except Exception:  # noqa: BLE001 - a lost worker fails its scene only
             finished(job, None, traceback.format_exc())
+
+
+def prepare_scene_set(scene_set: SceneSet, done_manifest: str | Path, *, num_episodes: int, seed: int,
+                      goal_images: bool, workers: int = 2, backend: str = "process") -> dict[str, str]:
+    """Make the scenes of the set that have no `episodes.json` yet (resumably; like the single-scene entry
+    points, existing episodes are used as they are); returns `{scene_id: folder}` of the ready ones."""
+    jobs = [j for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images)
+            if not (Path(j.path) / "episodes.json").is_file()]
+    failed = {}
+    if jobs:
+        report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
+        log.info("scene set: %s", report.format())
+        failed = report.failed
+    if failed:
+        log.warning("scene set: %d scene(s) left out after failing: %s", len(failed), sorted(failed))
+    ready = {e.scene_id: str(e.path) for e in scene_set
+             if e.scene_id not in failed and (e.path / "episodes.json").is_file()}
+    if not ready:
+        raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared: {failed}")
+    return ready
+
+
+def set_root(scene_cfg) -> Path:
+    """Where a configured set keeps its done-manifest: `scene.set.root`, else the manifest's folder."""
+    s = scene_cfg.set
+    return Path(s.get("root") or Path(str(s.manifest)).parent)
 
 
 def main(argv: list[str] | None = None) -> int:

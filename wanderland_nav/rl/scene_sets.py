@@ -1,7 +1,6 @@
-"""A scene set as training and evaluation envs: prepared in parallel, trained on together, evaluated per scene.
+"""A prepared scene set as training and evaluation envs: trained on together, evaluated per scene.
 
-`prepare_scene_set` runs `wanderland_nav.scene.batch` over the set (demo seeds built, scenes prepared,
-expert episodes written; resumable, failures listed and the failed scenes left out with a warning).
+The scenes come ready from `wanderland_nav.prepare_set.prepare_scene_set` (`{scene_id: folder}`).
 `make_multi_scene_env` is the picklable env factory the collectors call (a `MultiSceneNavEnv` whose
 per-scene `NavEnv`s read each scene's navmesh, level-of-detail Gaussians and episodes on first use).
 `SceneSetEvaluation` evaluates every scene's split once and reports rows overall, indoor/outdoor and
@@ -13,7 +12,6 @@ from __future__ import annotations
 import copy
 import logging
 from dataclasses import dataclass
-from pathlib import Path
 
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.evaluation import EvaluationResult, run_evaluation
@@ -21,28 +19,6 @@ from wanderland_nav.envs.metrics import EpisodeMetrics, format_table
 from wanderland_nav.envs.multi_scene import MultiSceneNavEnv, aggregate_by_scene
 
 log = logging.getLogger(__name__)
-
-
-def prepare_scene_set(scene_set, done_manifest: str | Path, *, num_episodes: int, seed: int, goal_images: bool,
-                      workers: int = 2, backend: str = "process") -> dict[str, str]:
-    """Make the scenes of the set that have no `episodes.json` yet (resumably; like the single-scene entry
-    points, existing episodes are used as they are); returns `{scene_id: folder}` of the ready ones."""
-    from wanderland_nav.scene.batch import jobs_for, run_batch
-
-    jobs = [j for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images)
-            if not (Path(j.path) / "episodes.json").is_file()]
-    failed = {}
-    if jobs:
-        report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
-        log.info("scene set: %s", report.format())
-        failed = report.failed
-    if failed:
-        log.warning("scene set: %d scene(s) left out after failing: %s", len(failed), sorted(failed))
-    ready = {e.scene_id: str(e.path) for e in scene_set
-             if e.scene_id not in failed and (e.path / "episodes.json").is_file()}
-    if not ready:
-        raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared: {failed}")
-    return ready
 
 
 def scene_env(scene_paths: dict[str, str], config: NavEnvConfig, split: str | None, device: str,
@@ -105,18 +81,14 @@ def default_num_active(batch_size: int, num_scenes: int) -> int:
     return max(k for k in range(1, min(batch_size, num_scenes) + 1) if batch_size % k == 0)
 
 
-def envs_from_config(cfg, scene_set, env_cfg: NavEnvConfig, seed: int, device: str):
-    """train.py's envs for `scene=<a set>`: `(scene_paths, eval_env, env_fn, bc_env_fn)`.
+def envs_from_config(cfg, paths: dict[str, str], env_cfg: NavEnvConfig, seed: int, device: str):
+    """train.py's envs for `scene=<a set>` over the ready scenes `paths`: `(eval_env, env_fn, bc_env_fn)`.
 
     BC (DAgger on expert paths indexed by episode) runs on the set's first scene only, and says so in the log;
     PPO and evaluation use every ready scene."""
     from functools import partial
 
     s = cfg.scene.set
-    root = Path(s.get("root") or Path(str(s.manifest)).parent)
-    paths = prepare_scene_set(scene_set, root / "prepare_done.json", num_episodes=int(cfg.episodes.num),
-                              seed=int(cfg.episodes.seed), goal_images=bool(cfg.episodes.goal_images),
-                              workers=int(s.get("prepare_workers") or 2))
     B, lod = int(cfg.train_env.batch_size), cfg.render.max_gaussians
     num_active = int(s.get("num_active") or default_num_active(B, len(paths)))
     budget = s.get("memory_budget_gb")
@@ -128,4 +100,4 @@ def envs_from_config(cfg, scene_set, env_cfg: NavEnvConfig, seed: int, device: s
              len(paths), num_active, B // num_active, first)
     bc_env_fn = partial(scene_env, paths, env_cfg, cfg.train_env.split, device, lod, first, B, seed)
     eval_env = SceneSetEvaluation(paths, env_cfg, int(cfg.eval.batch_size), cfg.eval.split, device, lod)
-    return paths, eval_env, env_fn, bc_env_fn
+    return eval_env, env_fn, bc_env_fn
