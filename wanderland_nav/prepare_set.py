@@ -20,7 +20,7 @@ import logging
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -208,11 +208,13 @@ def prepare_scene_set(scene_set: SceneSet, done_manifest: str | Path, *, num_epi
                       goal_images: bool, workers: int = 2, backend: str = "process",
                       collision: CollisionSettings = CollisionSettings(),
                       navmesh: NavMeshSettings | None = None) -> dict[str, str]:
-    """Make the scenes of the set that have no `episodes.json` yet (resumably; like the single-scene entry
-    points, existing episodes are used as they are); returns `{scene_id: folder}` of the ready ones."""
-    jobs = [j for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images,
-                                collision=collision, navmesh=navmesh)
-            if not (Path(j.path) / "episodes.json").is_file()]
+    """Prepare every scene of the set with these settings and make episodes where there are none
+    (resumably: the done-manifest skips scenes done with the same settings). Like the single-scene entry
+    points, a scene's existing `episodes.json` is used as it is, while its collision mesh and navmesh
+    are brought up to date with `collision` / `navmesh`. Returns `{scene_id: folder}` of the ready ones."""
+    jobs = [replace(j, expert=False) if (Path(j.path) / "episodes.json").is_file() else j
+            for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images,
+                              collision=collision, navmesh=navmesh)]
     failed = {}
     if jobs:
         report = run_batch(jobs, done_manifest, workers=workers, backend=backend)

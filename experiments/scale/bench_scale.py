@@ -18,7 +18,6 @@ import argparse
 import os
 import sys
 import time
-from functools import partial
 from pathlib import Path
 
 import torch
@@ -26,10 +25,12 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from policies import make_policy  # noqa: E402
+from wanderland_nav.compose.build import shaped_env_config  # noqa: E402
+from wanderland_nav.compose.scene_sets import scene_env_fn  # noqa: E402
+from wanderland_nav.envs.config import NavEnvConfig, TerminationConfig  # noqa: E402
 from wanderland_nav.envs.multi_scene import measure_bytes  # noqa: E402
-from wanderland_nav.rl.scene_sets import make_multi_scene_env, scene_env  # noqa: E402
-from wanderland_nav.rl.policy_env import shaped_env_config  # noqa: E402
 from wanderland_nav.rl.ppo import make_actor, make_collector  # noqa: E402
+from wanderland_nav.rl.scene_sets import multi_scene_env_fn  # noqa: E402
 from wanderland_nav.scene.sets import load_scene_set  # noqa: E402
 
 
@@ -38,22 +39,22 @@ def setup(scene_root: str):
     paths = {e.scene_id: str(e.path) for e in s}
     torch.manual_seed(0)
     policy = make_policy("citywalker", encoder="cnn", image_size=(32, 32), dim=128, depth=2, heads=4)
-    cfg = shaped_env_config({"termination": {"max_steps": 100}}, policy)
+    cfg = shaped_env_config(NavEnvConfig(termination=TerminationConfig(max_steps=100)), policy)
     return paths, policy, cfg
 
 
 def memory_per_scene(paths, cfg) -> None:
     for sid in paths:
         t0 = time.perf_counter()
-        env = scene_env(paths, cfg, "train", "cpu", 10000, sid, 4, 0)
+        env = scene_env_fn(paths, cfg, split="train", max_gaussians=10000)(sid, 4, 0)
         dt = time.perf_counter() - t0
         print(f"memory {sid}: {measure_bytes(env) / 2**20:.1f} MiB (NavEnv B=4, 10k LOD Gaussians), load {dt:.1f}s")
 
 
 def collect_fps(paths, policy, cfg, workers: int, iters: int, use_ray: bool) -> None:
     fpb = 4 * workers * 8  # 8 steps of 4 agents per worker per batch
-    env_fn = partial(make_multi_scene_env, paths, cfg, batch_size=4, num_active=2, split="train",
-                     max_gaussians=10000, seed=0)
+    env_fn = multi_scene_env_fn(list(paths), scene_env_fn(paths, cfg, split="train", max_gaussians=10000),
+                                batch_size=4, num_active=2, seed=0)
     t0 = time.perf_counter()
     c = make_collector(env_fn, make_actor(policy), frames_per_batch=fpb, total_frames=fpb * iters,
                        num_workers=workers, seed=0, ray={"address": None, "cpus_per_worker": 1} if use_ray else None)

@@ -7,6 +7,8 @@ prepared again): seconds, not the minutes three fresh demo seeds take (those run
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from wanderland_nav.compose import compose_config, typed_config
@@ -59,6 +61,9 @@ def test_evaluate_expert_over_a_set_has_a_row_per_scene(linked_set, tmp_path):
     assert {k for k in res.summary if k.startswith("scene/")} == {"scene/a", "scene/b"}
     assert res.summary["overall"]["episodes"] == 8 and res.summary["overall"]["SR"] == 1.0
     assert (tmp_path / "out" / "eval_expert.json").is_file()
+    # existing episodes are kept; the scenes were still brought up to the composed navigation settings
+    done = json.loads((linked_set / "prepare_done.json").read_text())["done"]
+    assert set(done) == {"a", "b"} and "episodes" not in done["a"]
 
 
 def test_scene_set_preparation_uses_the_composed_navigation_group():
