@@ -49,8 +49,25 @@ class SceneJob:
     navmesh: NavMeshSettings | None = None  # null: NavMeshSettings() (up axis: the scene's)
 
     def settings_hash(self) -> str:
-        d = {k: v for k, v in asdict(self).items() if k not in ("scene_id", "path")}
-        return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        """Every setting of the job: a scene done with the same hash is skipped."""
+        return _digest({k: v for k, v in asdict(self).items() if k not in ("scene_id", "path")})
+
+    def prepare_hash(self) -> str:
+        """The settings of the preparation alone: a prepare-only job (`expert=False`, the scene already
+        has episodes) is also covered by an earlier full job with the same preparation."""
+        keep = ("demo_seed", "demo_preset", "collision", "navmesh")
+        return _digest({k: v for k, v in asdict(self).items() if k in keep})
+
+    def done_by(self, entry: dict | None) -> bool:
+        """Whether a done-manifest entry covers this job."""
+        if entry is None:
+            return False
+        return entry.get("settings_hash") == self.settings_hash() or (
+            not self.expert and entry.get("prepare_hash") == self.prepare_hash())
+
+
+def _digest(d: dict) -> str:
+    return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def prepare_one(job: SceneJob) -> dict:
@@ -135,7 +152,7 @@ def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int =
     todo = []
     for j in jobs:
         prev = manifest["done"].get(j.scene_id)
-        if prev is not None and prev.get("settings_hash") == j.settings_hash():
+        if j.done_by(prev):
             report.done[j.scene_id] = prev
             report.skipped.append(j.scene_id)
         else:
@@ -143,7 +160,7 @@ def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int =
 
     def finished(job: SceneJob, result: dict | None, error: str | None) -> None:
         if error is None:
-            entry = {**result, "settings_hash": job.settings_hash()}
+            entry = {**result, "settings_hash": job.settings_hash(), "prepare_hash": job.prepare_hash()}
             manifest["done"][job.scene_id] = report.done[job.scene_id] = entry
             manifest["failed"].pop(job.scene_id, None)
         else:

@@ -43,6 +43,20 @@ def test_failures_are_collected_and_a_rerun_resumes(tmp_path, backend):
     assert r3.skipped == [] and r3.done["s1"]["episodes"] == 7 and (tmp_path / "s1" / "calls").read_text() == "2"
 
 
+def test_a_prepare_only_job_is_covered_by_an_earlier_full_job_with_the_same_preparation(tmp_path):
+    from dataclasses import replace
+
+    from wanderland_nav.scene.collision import CollisionSettings
+
+    manifest = tmp_path / "done.json"
+    run_batch(jobs(tmp_path, ["s1"]), manifest, backend="serial", fn=fake_work)
+    prepare_only = [replace(j, expert=False) for j in jobs(tmp_path, ["s1"])]
+    assert run_batch(prepare_only, manifest, backend="serial", fn=fake_work).skipped == ["s1"]
+    coarser = [replace(j, collision=CollisionSettings(voxel_size=0.5)) for j in prepare_only]
+    assert run_batch(coarser, manifest, backend="serial", fn=fake_work).skipped == []  # other preparation: redone
+    assert (tmp_path / "s1" / "calls").read_text() == "2"
+
+
 def test_process_backend_runs_in_worker_processes(tmp_path):
     r = run_batch(jobs(tmp_path, ["a", "b"]), tmp_path / "d.json", workers=2, backend="process", fn=fake_work)
     assert os.getpid() not in {d["pid"] for d in r.done.values()}
