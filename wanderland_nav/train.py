@@ -23,8 +23,11 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.viz.curves import write_learning_curves
 from wanderland_nav.rl.report import comparison_table, row_estimates
+from wanderland_nav.rl.scene_sets import SceneSetEvaluation
+from wanderland_nav.viz.curves import write_learning_curves
+
+log = logging.getLogger("wanderland_nav.train")
 
 
 def run(cfg: DictConfig) -> dict:
@@ -35,6 +38,13 @@ def run(cfg: DictConfig) -> dict:
 
     def evaluate(name, policy, env, step, logger, episodes_path):
         wants = bool(getattr(logger, "wants_rollouts", False))  # logger=rerun shows eval renders
+        if isinstance(env, SceneSetEvaluation):  # rows overall, indoor/outdoor and scene/<id>
+            if c.save_rollouts or wants:
+                log.warning("eval %s: rollouts are recorded for single scenes only, not for a scene set", name)
+            res = env.run(PolicyActor(policy, c.eval.deterministic), c.eval.episodes, seed=c.seed, name=name,
+                          progress=c.progress)
+            log.info("eval %s per scene:\n%s", name, res.table)
+            return res
         path = Path(c.save_rollouts) / f"{name.replace('+', '_')}.npz" if c.save_rollouts else None
         return evaluate_and_record(env, PolicyActor(policy, c.eval.deterministic), path, num_episodes=c.eval.episodes,
                                    seed=c.seed, name=name, frames=wants, progress=c.progress,
@@ -46,7 +56,8 @@ def run(cfg: DictConfig) -> dict:
     results, rows = run_recipe(recipe)
     table = comparison_table({r: results[r]["records"] for r in rows}, baseline=rows[0])
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
-    header = (f"{c.exp_name} | scene {scene.name} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
+    where = f"set {c.scene.name}" if c.scene.set else scene.name
+    header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
               f"run {recipe.identity['hash'][:8]} | {time.perf_counter() - t_start:.0f}s")
     atomic_write_text(recipe.run_dir / "table.txt", header + "\n" + table + "\n")
     write_learning_curves(recipe.run_dir, {r: (results[r].get("frames", 0), row_estimates(results[r]["records"]))

@@ -10,10 +10,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
+from wanderland_nav.compose.scene_sets import scene_env_fn
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
 from wanderland_nav.rl.report import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
+from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 
 
 def checkpoint_label(path: Path) -> str:
@@ -36,8 +38,11 @@ def stored_env_config(conf: dict, path) -> NavEnvConfig:
 
 
 def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
-                        batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False):
-    """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table)."""
+                        batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False,
+                        scene_set: dict[str, str] | None = None):
+    """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table).
+    With `scene_set` (`{scene_id: folder}`, prepared) each checkpoint runs every scene's split instead
+    (`scene`, `episodes_path`, `navmesh` unused); its result has rows overall, indoor/outdoor, scene/<id>."""
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")
     rows, results = {}, {}
@@ -46,16 +51,21 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         conf = ckpt.get("config") or {}
         render = conf.get("render") or {}
         env_cfg = shaped_env_config(stored_env_config(conf, path), policy, render.get("image_size"))
-        g = scene_gaussians(scene, render.get("max_gaussians"), needed=env_cfg.camera.enabled)
         goal_kw = dict(goal_input=str(conf.get("goal_input") or "goal"),
                        lookahead=float(conf.get("route_lookahead") or 3.0))  # as the checkpoint was trained
-        env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size, seed=seed,
-                                         device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)
-        res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)
-        env.close()
+        if scene_set is not None:
+            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, max_gaussians=render.get("max_gaussians"))
+            res = SceneSetEvaluation(list(scene_set), envs, batch_size).run(PolicyActor(policy), num_episodes,
+                                                                            seed=seed, name=label, progress=progress)
+        else:
+            g = scene_gaussians(scene, render.get("max_gaussians"), needed=env_cfg.camera.enabled)
+            env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
+                                             seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
+            res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)
+            env.close()
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table

@@ -30,6 +30,23 @@ from wanderland_nav.scene.collision import CollisionSettings
 
 # ------------------------------------------------------------------------------ shared groups
 @dataclass
+class SceneSetSettings:
+    """`scene.set` (`conf/scene/demo_set.yaml`): many scenes trained on together and evaluated per scene.
+    Demo seeds (`seeds`) or a manifest (`wanderland_nav/scene/sets.py`: folder, .txt list, .csv)."""
+
+    root: Optional[str] = None  # where the demo seeds are built and prepare_done.json lives (null: manifest's folder)
+    seeds: Optional[List[int]] = None  # procedural demo seeds (then `manifest` is ignored)
+    preset: str = "tiny"  # demo seeds only
+    manifest: Optional[str] = None
+    data_root: Optional[str] = None  # list/CSV paths resolve against it (null: the manifest's folder)
+    tiers: Optional[List[str]] = None  # CSV quality tiers kept (null: all)
+    split: Optional[str] = None  # manifest split kept (null: all)
+    num_active: Optional[int] = None  # scenes stepped at once (null: most that split train_env.batch_size evenly)
+    memory_budget_gb: Optional[float] = None  # LRU budget for loaded scenes per env (null: keep all)
+    prepare_workers: int = 2  # parallel scene preparation (process pool)
+
+
+@dataclass
 class SceneGroup:
     """`conf/scene/*.yaml`: the procedural demo (`demo: true`) or a scene folder (`scene=<path>`)."""
 
@@ -39,6 +56,7 @@ class SceneGroup:
     seed: int = 0  # demo only
     preset: str = "default"  # demo only: "tiny" | "default"
     up_axis: Optional[str] = None  # null: the scene's own (scene_meta.json, else its layout's convention)
+    set: Optional[SceneSetSettings] = None  # a scene set (train/evaluate); single-scene entry points use `path`
 
 
 @dataclass
@@ -80,7 +98,25 @@ class LoggerGroup:
 
 @dataclass
 class CollectorGroup:
+    """`conf/collector/*.yaml`: local collectors (one process, or `num_workers` processes) or
+    `kind: ray`, `num_workers` TorchRL Ray collectors (`rl/ray_collector.py`), one machine or a cluster."""
+
+    kind: str = "local"  # local | ray
     num_workers: int = 1
+    address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
+    cpus_per_worker: float = 1.0  # ray
+    memory_per_worker_gb: Optional[float] = None  # ray
+
+    def __post_init__(self):
+        if self.kind not in ("local", "ray"):
+            raise ValueError(f"collector.kind={self.kind!r}: expected local or ray")
+
+    def ray_options(self) -> Optional[dict]:
+        """`make_collector`'s `ray` options; None for the local collectors."""
+        if self.kind != "ray":
+            return None
+        return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
+                "memory_per_worker_gb": self.memory_per_worker_gb}
 
 
 @dataclass

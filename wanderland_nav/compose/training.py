@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -13,10 +14,13 @@ from wanderland_nav.compose.build import (env_factory, load_navmesh, make_logger
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.episode_file import episodes_for_run
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
+from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.rl.recipe import Recipe
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
+from wanderland_nav.rl.scene_sets import SceneSetEvaluation, multi_scene_env_fn
+from wanderland_nav.scene import load_scene
 
 log = logging.getLogger("wanderland_nav.train")
 
@@ -40,12 +44,8 @@ def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
     return run_dir
 
 
-def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, object]:
-    """(Recipe, scene). `config`: the resolved config as a plain dict (stored in checkpoints);
-    `evaluate(name, policy, env, step, logger, episodes_path)` runs one evaluation."""
-    torch.manual_seed(c.seed)
-    if c.threads:
-        torch.set_num_threads(c.threads)
+def _single_scene(c: TrainConfig):
+    """(scene, episodes file, identity's scene part, env_cfg -> (eval_env, env_fn, bc_env_fn))."""
     scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
     if c.episodes.path is not None:
         scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
@@ -55,18 +55,58 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
         episodes_path = episodes_for_run(scene, Path(own), num=c.episodes.num, seed=c.episodes.seed,
                                          splits=tuple(c.episodes.splits), goal_images=c.episodes.goal_images)
         scene.episodes_path = episodes_path
-    identity = run_identity(config, scene_identity(scene.root, episodes_path))
+    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
+
+    def envs(env_cfg):
+        parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
+                     gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
+        eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
+                                              batch_size=c.eval.batch_size, **parts), **goal)()
+        env_fn = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.train_env.split,
+                                            batch_size=c.train_env.batch_size, **parts), **goal)
+        return eval_env, env_fn, env_fn
+
+    return scene, episodes_path, scene_identity(scene.root, episodes_path), envs
+
+
+def _scene_set(c: TrainConfig):
+    """`scene.set`: every ready scene for PPO (a `MultiSceneNavEnv`) and per-scene evaluation; BC (DAgger
+    on per-episode expert paths) warm-starts on the set's first scene only, and says so."""
+    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
+                            goal_images=c.episodes.goal_images)
+    first = next(iter(paths))
+    scene = load_scene(paths[first])
+    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)
+
+    def envs(env_cfg):
+        kw = dict(device=c.device, max_gaussians=c.render.max_gaussians)
+        train_scene_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.train_env.split, **kw), **goal)
+        env_fn = multi_scene_env_fn(list(paths), train_scene_env, batch_size=c.train_env.batch_size,
+                                    num_active=c.scene.set.num_active, device=c.device,
+                                    memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)
+        log.info("scene set: %d scenes, %d active at a time; BC warm start on %s only", len(paths),
+                 env_fn.keywords["num_active"], first)
+        eval_env = SceneSetEvaluation(list(paths), GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.eval.split,
+                                                                               **kw), **goal), c.eval.batch_size)
+        return eval_env, env_fn, partial(train_scene_env, first, c.train_env.batch_size, c.seed)
+
+    return scene, None, scene_set_identity(paths), envs
+
+
+def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, object]:
+    """(Recipe, scene: the single scene, or a set's first). `config`: the resolved config as a plain dict
+    (stored in checkpoints); `evaluate(name, policy, env, step, logger, episodes_path)` runs one evaluation
+    (`env` is a `SceneSetEvaluation` for a scene set, `episodes_path` then None)."""
+    torch.manual_seed(c.seed)
+    if c.threads:
+        torch.set_num_threads(c.threads)
+    scene, episodes_path, scene_part, envs = _scene_set(c) if c.scene.set else _single_scene(c)
+    identity = run_identity(config, scene_part)
     run_dir = checked_run_dir(c, identity)
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
-    parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
-                 gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
-    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
-    eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
-                                          batch_size=c.eval.batch_size, **parts), **goal)()
-    env_fn = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.train_env.split,
-                                        batch_size=c.train_env.batch_size, **parts), **goal)
+    eval_env, env_fn, bc_env_fn = envs(env_cfg)
     logger = make_logger(c.logger, run_dir, scene)
     first = "untrained"
     if c.init_checkpoint:
@@ -78,9 +118,10 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     elif getattr(policy, "pretrained_from", None) is None:
         log.info("policy %s: randomly initialised (no init_checkpoint)", c.policy.get("name"))
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
-    recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, nav_from_scene=scene.nav_from_scene, bc=bc,
-                    ppo=c.algo.ppo if c.algo.ppo.enabled else None,
+    recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, bc_env_fn=bc_env_fn,
+                    nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
                     evaluate=lambda name, pol, env, step: evaluate(name, pol, env, step, logger, episodes_path),
                     logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
-                    num_workers=c.collector.num_workers, progress=c.progress, first_row=first)
+                    num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
+                    first_row=first)
     return recipe, scene

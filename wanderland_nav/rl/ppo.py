@@ -92,8 +92,14 @@ def make_actor(policy: NavPolicy) -> ProbabilisticActor:
 
 
 def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: int, total_frames: int,
-                   num_workers: int = 1, seed: int = 0):
-    """One process (`Collector`) or `num_workers` synchronous processes (`MultiSyncCollector`)."""
+                   num_workers: int = 1, seed: int = 0, ray: dict | None = None):
+    """One process (`Collector`) or `num_workers` synchronous processes (`MultiSyncCollector`); with `ray`
+    (the `collector=ray` options) `num_workers` Ray actors (`wanderland_nav.rl.ray_collector`)."""
+    if ray is not None:
+        from wanderland_nav.rl.ray_collector import make_ray_collector
+
+        return make_ray_collector(env_fn, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
+                                  num_workers=num_workers, seed=seed, **ray)
     if num_workers <= 1:
         c = Collector(env_fn, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
                       split_trajs=False, auto_register_policy_transforms=False)  # stateless policy: no InitTracker
@@ -142,8 +148,9 @@ class PPOTrainer:
 
     def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase], cfg: PPOConfig, *,
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
-                 seed: int = 0, config_dict: dict | None = None, progress: bool = True):
+                 seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
+        self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
         if policy.config.freeze_encoder != "never":  # "rl" (the paper: update only the policy) or "always"
@@ -259,7 +266,7 @@ class PPOTrainer:
             return {}
         collector = make_collector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
                                    total_frames=remaining, num_workers=self.num_workers,
-                                   seed=self.seed + 1000 * self.iteration)
+                                   seed=self.seed + 1000 * self.iteration, ray=self.ray)
         pbar = tqdm(total=cfg.total_frames, initial=self.frames, desc="PPO", unit="f", disable=not self.progress,
                     dynamic_ncols=True)
         last: dict[str, float] = {}

@@ -41,6 +41,8 @@ class Recipe:
     num_workers: int = 1
     progress: bool = True
     first_row: str = "untrained"
+    bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: its first scene); None: env_fn
+    ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
 
 
 def _load_results(path: Path, state, identity_hash: str) -> dict:
@@ -80,7 +82,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
             r.policy.load_state_dict(state["policy"])
             log.info("BC already done; loaded its weights")
         else:
-            train_env = r.env_fn()
+            train_env = (r.bc_env_fn or r.env_fn)()
             paths = ExpertPaths.from_episodes(train_env.episodes, r.nav_from_scene)
             stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed, progress=r.progress)
             train_env.close()
@@ -93,7 +95,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         rows.append("BC")
     if r.ppo is not None:
         trainer = PPOTrainer(r.policy, r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
-                             seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
+                             ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)

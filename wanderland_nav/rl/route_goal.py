@@ -70,12 +70,13 @@ def with_goal_input(env, goal_input: str = "goal", lookahead: float = 3.0):
 
 
 class GoalInputEnvFn:
-    """A picklable env factory (collector workers call it): `env_fn()` with the goal input applied."""
+    """A picklable env factory (collector workers call it): `env_fn(*args, **kwargs)` with the goal input
+    applied (a plain `() -> env` factory, or a per-scene `(scene_id, batch_size, seed) -> env` one)."""
 
     def __init__(self, env_fn, goal_input: str = "goal", lookahead: float = 3.0):
         if goal_input not in GOAL_INPUTS:
             raise ValueError(f"goal_input={goal_input!r}: expected one of {GOAL_INPUTS}")
         self.env_fn, self.goal_input, self.lookahead = env_fn, goal_input, float(lookahead)
 
-    def __call__(self):
-        return with_goal_input(self.env_fn(), self.goal_input, self.lookahead)
+    def __call__(self, *args, **kwargs):
+        return with_goal_input(self.env_fn(*args, **kwargs), self.goal_input, self.lookahead)

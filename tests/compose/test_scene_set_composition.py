@@ -1,0 +1,91 @@
+"""`scene.set` through the composition root: train steps every scene (BC on the first), evaluate reports a
+row per scene, preparation hears the composed navigation group, and collector=ray reaches the recipe.
+
+The set is a folder of two links to the session's prepared demo scene (it has episodes, so nothing is
+prepared again): seconds, not the minutes three fresh demo seeds take (those run in tests/scale, slow).
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wanderland_nav.compose import compose_config, typed_config
+from wanderland_nav.compose.schema import EvaluateConfig, SceneSetSettings, TrainConfig
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture
+def linked_set(demo_episodes, tmp_path):
+    """A manifest folder `set/{a,b}` whose scenes are the prepared demo (episodes included)."""
+    root = tmp_path / "set"
+    root.mkdir()
+    for name in ("a", "b"):
+        (root / name).symlink_to(demo_episodes.parent, target_is_directory=True)
+    return root
+
+
+def set_overrides(root) -> list[str]:
+    return ["scene=demo_set", "scene.set.seeds=null", f"scene.set.manifest={root}", f"scene.set.root={root}"]
+
+
+def test_train_recipe_over_a_set_steps_every_scene_and_clones_on_the_first(linked_set, tmp_path):
+    from wanderland_nav.compose.training import training_recipe
+    from wanderland_nav.envs.multi_scene import MultiSceneNavEnv
+    from wanderland_nav.rl.scene_sets import SceneSetEvaluation
+
+    cfg = compose_config("train", ["+exp=citywalker_rl", "debug=smoke", "collector=ray", f"run_dir={tmp_path / 'run'}",
+                                   "render.max_gaussians=2000", *set_overrides(linked_set)])
+    c = typed_config(cfg, TrainConfig)
+    recipe, scene = training_recipe(c, {"seed": 0}, evaluate=None)
+    assert isinstance(recipe.eval_env, SceneSetEvaluation) and recipe.eval_env.scene_ids == ["a", "b"]
+    assert sorted(recipe.identity["scene"]["scenes"]) == ["a", "b"]
+    assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None}
+    train_env = recipe.env_fn()
+    assert isinstance(train_env, MultiSceneNavEnv) and tuple(train_env.batch_size) == (2,)
+    assert train_env.num_active == 2  # batch 2 over 2 scenes: one agent each
+    train_env.close()
+    bc_env = recipe.bc_env_fn()
+    assert str(bc_env.scene.root).endswith("set/a") and tuple(bc_env.batch_size) == (2,)
+    bc_env.close()
+    recipe.logger.close()
+
+
+def test_evaluate_expert_over_a_set_has_a_row_per_scene(linked_set, tmp_path):
+    from wanderland_nav.evaluate import run
+
+    res = run(compose_config("evaluate", ["debug=smoke", "reference=expert", "split=null", f"out={tmp_path / 'out'}",
+                                          *set_overrides(linked_set)]))
+    assert {k for k in res.summary if k.startswith("scene/")} == {"scene/a", "scene/b"}
+    assert res.summary["overall"]["episodes"] == 8 and res.summary["overall"]["SR"] == 1.0
+    assert (tmp_path / "out" / "eval_expert.json").is_file()
+    # existing episodes are kept; the scenes were still brought up to the composed navigation settings
+    done = json.loads((linked_set / "prepare_done.json").read_text())["done"]
+    assert set(done) == {"a", "b"} and "episodes" not in done["a"]
+
+
+def test_scene_set_preparation_uses_the_composed_navigation_group():
+    from wanderland_nav.prepare_set import jobs_for
+    from wanderland_nav.scene.sets import demo_scene_set
+
+    s = demo_scene_set("/tmp/unused", seeds=[0])
+    default = typed_config(compose_config("train", ["scene=demo_set"]), TrainConfig).navigation
+    wider = typed_config(compose_config("train", ["scene=demo_set", "navigation.navmesh.agent_radius=0.4"]),
+                         TrainConfig).navigation
+    jobs = [jobs_for(s, collision=n.collision, navmesh=n.navmesh)[0] for n in (default, wider)]
+    assert jobs[1].navmesh.agent_radius == 0.4
+    assert jobs[0].settings_hash() != jobs[1].settings_hash()  # a rerun with other settings prepares again
+
+
+def test_a_set_without_seeds_or_manifest_is_refused():
+    from wanderland_nav.compose.scene_sets import set_root
+    from wanderland_nav.scene.sets import ManifestError, scene_set_from_config
+
+    c = typed_config(compose_config("evaluate", ["scene=demo_set", "scene.set.seeds=null", "scene.set.root=null"]),
+                     EvaluateConfig)
+    with pytest.raises(ManifestError, match="scene.set: neither `seeds`"):
+        scene_set_from_config(c.scene)
+    with pytest.raises(ValueError, match="scene.set: give `root`"):
+        set_root(SceneSetSettings())

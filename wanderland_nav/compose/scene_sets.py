@@ -1,0 +1,64 @@
+"""Config -> a prepared scene set and its per-scene env factory, for `train` and `evaluate`.
+
+A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes; `ready_scene_set` prepares the ones
+without episodes (in parallel, resumably: `wanderland_nav/prepare_set.py`) with the same `navigation`
+settings every entry point composes, and `scene_env_fn` is the picklable per-scene env factory that
+`rl/scene_sets.py` (multi-scene training, per-scene evaluation) and the collector workers call.
+"""
+
+from __future__ import annotations
+
+import logging
+from functools import partial
+from pathlib import Path
+
+from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians
+from wanderland_nav.compose.identity import scene_identity
+from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
+from wanderland_nav.envs.config import NavEnvConfig
+from wanderland_nav.prepare_set import prepare_scene_set
+from wanderland_nav.scene import load_scene
+from wanderland_nav.scene.sets import scene_set_from_config
+
+log = logging.getLogger(__name__)
+
+
+def set_root(s: SceneSetSettings) -> Path:
+    """Where a configured set keeps its done-manifest: `scene.set.root`, else the manifest's folder."""
+    if s.root:
+        return Path(s.root)
+    if s.manifest is None:
+        raise ValueError("scene.set: give `root` (demo seeds) or `manifest`")
+    return Path(s.manifest).parent
+
+
+def ready_scene_set(scene: SceneGroup, navigation: NavigationGroup, *, num_episodes: int, seed: int,
+                    goal_images: bool) -> dict[str, str]:
+    """`{scene_id: folder}` of the set's scenes that are prepared and have episodes (made when missing);
+    scenes that fail are left out and logged by `prepare_scene_set`, an empty set raises."""
+    scene_set = scene_set_from_config(scene)
+    paths = prepare_scene_set(scene_set, set_root(scene.set) / "prepare_done.json", num_episodes=num_episodes,
+                              seed=seed, goal_images=goal_images, workers=scene.set.prepare_workers,
+                              collision=navigation.collision, navmesh=navigation.navmesh)
+    log.info("scene set %s: %d of %d scenes ready", scene_set.source, len(paths), len(scene_set))
+    return paths
+
+
+def scene_set_identity(paths: dict[str, str]) -> dict:
+    """The run identity's scene part for a set: every scene's prepared artefacts and episodes."""
+    return {"scenes": {sid: scene_identity(p, Path(p) / "episodes.json") for sid, p in paths.items()}}
+
+
+def _scene_env(paths: dict[str, str], env_cfg: NavEnvConfig, split, device: str, max_gaussians, scene_id: str,
+               sub_batch: int, seed: int):
+    """One scene's `NavEnv` over its own navmesh, level-of-detail Gaussians and `episodes.json`."""
+    scene = load_scene(paths[scene_id])
+    return env_factory(scene, Path(scene.root) / "episodes.json", env_cfg, split=split, batch_size=sub_batch, seed=seed,
+                       device=device, navmesh=load_navmesh(scene),
+                       gaussians=scene_gaussians(scene, max_gaussians, needed=env_cfg.camera.enabled))()
+
+
+def scene_env_fn(paths: dict[str, str], env_cfg: NavEnvConfig, *, split, device: str = "cpu",
+                 max_gaussians: int | None = None):
+    """A picklable `(scene_id, sub_batch, seed) -> NavEnv` over the prepared `paths`."""
+    return partial(_scene_env, dict(paths), env_cfg, split, device, max_gaussians)

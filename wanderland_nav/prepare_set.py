@@ -1,0 +1,275 @@
+"""Prepare + expert over a scene set in parallel, resumably: `python -m wanderland_nav.prepare_set <set>`.
+
+Each scene is one task: build it if it is a demo seed, `prepare_scene` (collision mesh, navmesh) and
+`write_scene_episodes` (expert episodes). Tasks run as Ray tasks when `ray` is importable and a cluster
+is reachable or startable (`backend="ray"`), else in a local `ProcessPoolExecutor` (`"process"`), or in
+this process (`"serial"`, for debugging). Why not a home-made scheduler: Ray already places tasks over
+machines; the local pool covers one machine without it.
+
+Resumable: `done_manifest` (JSON, written atomically after every finished scene) records each finished
+scene with the hash of the job settings; a rerun skips those and retries failures. A scene that raises
+does not stop the others: its error is recorded under `failed` and reported at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import logging
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+from planners import NavMeshSettings
+from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.scene.collision import CollisionSettings
+from wanderland_nav.scene.sets import SceneSet, demo_scene_set, load_scene_set
+
+log = logging.getLogger(__name__)
+MANIFEST_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class SceneJob:
+    """One scene's work; picklable, so it crosses into worker processes and Ray tasks."""
+
+    scene_id: str
+    path: str
+    num_episodes: int = 100
+    seed: int = 0
+    demo_seed: int | None = None  # a procedural demo scene to build first
+    demo_preset: str = "tiny"
+    expert: bool = True
+    goal_images: bool = True  # rendered goal views (seconds each on a CPU); point-goal training needs none
+    collision: CollisionSettings = CollisionSettings()  # the composed `navigation` group's settings
+    navmesh: NavMeshSettings | None = None  # null: NavMeshSettings() (up axis: the scene's)
+
+    def settings_hash(self) -> str:
+        """Every setting of the job: a scene done with the same hash is skipped."""
+        return _digest({k: v for k, v in asdict(self).items() if k not in ("scene_id", "path")})
+
+    def prepare_hash(self) -> str:
+        """The settings of the preparation alone: a prepare-only job (`expert=False`, the scene already
+        has episodes) is also covered by an earlier full job with the same preparation."""
+        keep = ("demo_seed", "demo_preset", "collision", "navmesh")
+        return _digest({k: v for k, v in asdict(self).items() if k in keep})
+
+    def done_by(self, entry: dict | None) -> bool:
+        """Whether a done-manifest entry covers this job."""
+        if entry is None:
+            return False
+        return entry.get("settings_hash") == self.settings_hash() or (
+            not self.expert and entry.get("prepare_hash") == self.prepare_hash())
+
+
+def _digest(d: dict) -> str:
+    return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def prepare_one(job: SceneJob) -> dict:
+    """Build (demo), prepare and write expert episodes for one scene; returns figures for the manifest."""
+    import torch
+
+    torch.set_num_threads(1)  # one task per core: no oversubscription
+    t0 = time.perf_counter()
+    if job.demo_seed is not None:
+        from wanderland_nav.scene import make_demo_scene
+
+        make_demo_scene(Path(job.path), seed=job.demo_seed, preset=job.demo_preset)
+    from wanderland_nav.scene_preparation import prepare_scene
+
+    scene = prepare_scene(job.path, collision=job.collision, navmesh=job.navmesh)
+    out = {"prepare_s": time.perf_counter() - t0}
+    if job.expert:
+        from planners import NavMesh
+        from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+
+        episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
+                                                 Path(scene.root) / "episodes.json", num_episodes=job.num_episodes,
+                                                 seed=job.seed, settings=GeneratorSettings(goal_images=job.goal_images))
+        out.update(episodes=len(episodes), expert_skipped=bool(summary.skipped))
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+@dataclass
+class BatchReport:
+    done: dict[str, dict] = field(default_factory=dict)  # scene id -> figures (this run and earlier ones)
+    failed: dict[str, str] = field(default_factory=dict)  # scene id -> error (this run)
+    skipped: list[str] = field(default_factory=list)  # already done by an earlier run
+    backend: str = ""
+    seconds: float = 0.0
+
+    def format(self) -> str:
+        lines = [f"{len(self.done)} scenes done ({len(self.skipped)} from an earlier run), {len(self.failed)} failed, "
+                 f"{self.seconds:.1f}s on {self.backend}"]
+        lines += [f"  FAILED {sid}: {err.strip().splitlines()[-1] if err.strip() else err}"
+                  for sid, err in self.failed.items()]
+        return "\n".join(lines)
+
+
+def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0, expert: bool = True,
+             goal_images: bool = True, collision: CollisionSettings = CollisionSettings(),
+             navmesh: NavMeshSettings | None = None) -> list[SceneJob]:
+    seeds = scene_set.demo.get("seeds") or [None] * len(scene_set)
+    return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), expert,
+                     goal_images, collision, navmesh) for e, s in zip(scene_set.entries, seeds)]
+
+
+def _read_manifest(path: Path) -> dict:
+    if not path.is_file():
+        return {"format": MANIFEST_FORMAT, "done": {}, "failed": {}}
+    try:
+        m = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: done-manifest is not JSON ({e}); delete it to start over") from e
+    if m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("done"), dict):
+        raise ValueError(f"{path}: field 'format' must be {MANIFEST_FORMAT} with a 'done' object; "
+                         "delete it to start over")
+    return m
+
+
+def _pick_backend(backend: str) -> str:
+    if backend != "auto":
+        return backend
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return "process"
+    return "ray"
+
+
+def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int = 2, backend: str = "auto",
+              fn: Callable[[SceneJob], dict] = prepare_one) -> BatchReport:
+    """Run `fn` over the jobs not yet done (by `settings_hash`), `workers` at a time; never raises for a scene."""
+    t0, path = time.perf_counter(), Path(done_manifest)
+    manifest = _read_manifest(path)
+    report = BatchReport(backend=_pick_backend(backend))
+    todo = []
+    for j in jobs:
+        prev = manifest["done"].get(j.scene_id)
+        if j.done_by(prev):
+            report.done[j.scene_id] = prev
+            report.skipped.append(j.scene_id)
+        else:
+            todo.append(j)
+
+    def finished(job: SceneJob, result: dict | None, error: str | None) -> None:
+        if error is None:
+            entry = {**result, "settings_hash": job.settings_hash(), "prepare_hash": job.prepare_hash()}
+            manifest["done"][job.scene_id] = report.done[job.scene_id] = entry
+            manifest["failed"].pop(job.scene_id, None)
+        else:
+            manifest["failed"][job.scene_id] = report.failed[job.scene_id] = error
+            log.error("scene %s failed: %s", job.scene_id, error.strip().splitlines()[-1] if error.strip() else error)
+        atomic_write_json(path, manifest)
+
+    runner = {"ray": _run_ray, "process": _run_pool, "serial": _run_serial}.get(report.backend)
+    if runner is None:
+        raise ValueError(f"backend must be auto | ray | process | serial, got {backend!r}")
+    if todo:
+        runner(todo, fn, max(1, int(workers)), finished)
+    report.seconds = time.perf_counter() - t0
+    return report
+
+
+def _guarded(fn, job):
+    """Run one job; a failure comes back as text (a traceback), so one scene never stops the rest."""
+    try:
+        return fn(job), None
+    except Exception:  # noqa: BLE001 - every per-scene error is reported, none stops the batch
+        return None, traceback.format_exc()
+
+
+def _run_serial(todo, fn, workers, finished) -> None:
+    for job in todo:
+        finished(job, *_guarded(fn, job))
+
+
+def _run_pool(todo, fn, workers, finished) -> None:
+    import multiprocessing as mp
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
+        pending = {ex.submit(_guarded, fn, job): job for job in todo}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                job = pending.pop(fut)
+                try:
+                    finished(job, *fut.result())
+                except Exception:  # noqa: BLE001 - a dead worker process fails its scene only
+                    finished(job, None, traceback.format_exc())
+
+
+def _run_ray(todo, fn, workers, finished) -> None:
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)  # joins RAY_ADDRESS if set
+    task = ray.remote(num_cpus=1, max_retries=0)(_guarded)
+    pending = {task.remote(fn, job): job for job in todo}
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        job = pending.pop(ready[0])
+        try:
+            finished(job, *ray.get(ready[0]))
+        except Exception:  # noqa: BLE001 - a lost worker fails its scene only
+            finished(job, None, traceback.format_exc())
+
+
+def prepare_scene_set(scene_set: SceneSet, done_manifest: str | Path, *, num_episodes: int, seed: int,
+                      goal_images: bool, workers: int = 2, backend: str = "process",
+                      collision: CollisionSettings = CollisionSettings(),
+                      navmesh: NavMeshSettings | None = None) -> dict[str, str]:
+    """Prepare every scene of the set with these settings and make episodes where there are none
+    (resumably: the done-manifest skips scenes done with the same settings). Like the single-scene entry
+    points, a scene's existing `episodes.json` is used as it is, while its collision mesh and navmesh
+    are brought up to date with `collision` / `navmesh`. Returns `{scene_id: folder}` of the ready ones."""
+    jobs = [replace(j, expert=False) if (Path(j.path) / "episodes.json").is_file() else j
+            for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images,
+                              collision=collision, navmesh=navmesh)]
+    failed = {}
+    if jobs:
+        report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
+        log.info("scene set: %s", report.format())
+        failed = report.failed
+    if failed:
+        log.warning("scene set: %d scene(s) left out after failing: %s", len(failed), sorted(failed))
+    ready = {e.scene_id: str(e.path) for e in scene_set
+             if e.scene_id not in failed and (e.path / "episodes.json").is_file()}
+    if not ready:
+        raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared: {failed}")
+    return ready
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", help="manifest (.txt list, .csv, folder of scenes) or 'demo_set'")
+    p.add_argument("--data-root"), p.add_argument("--tiers", nargs="*"), p.add_argument("--split")
+    p.add_argument("--demo-seeds", type=int, nargs="*", default=[0, 1, 2])
+    p.add_argument("--demo-root", default="data/scenes/demo_set")
+    p.add_argument("--episodes", type=int, default=100), p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-expert", action="store_true"), p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--no-goal-images", action="store_true")
+    p.add_argument("--backend", default="auto", choices=["auto", "ray", "process", "serial"])
+    p.add_argument("--manifest", help="done-manifest JSON (default: <set folder>/prepare_done.json)")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if a.scenes == "demo_set":
+        s, default_manifest = demo_scene_set(a.demo_root, a.demo_seeds), Path(a.demo_root) / "prepare_done.json"
+    else:
+        s = load_scene_set(a.scenes, data_root=a.data_root, tiers=a.tiers, split=a.split)
+        src = Path(a.scenes)
+        default_manifest = (src if src.is_dir() else src.parent) / f"{src.stem}_prepare_done.json"
+    jobs = jobs_for(s, num_episodes=a.episodes, seed=a.seed, expert=not a.no_expert, goal_images=not a.no_goal_images)
+    report = run_batch(jobs, a.manifest or default_manifest, workers=a.workers, backend=a.backend)
+    print(report.format())
+    return 1 if report.failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,66 @@
+"""A prepared scene set as training and evaluation envs: trained on together, evaluated per scene.
+
+Both sides take `scene_env(scene_id, sub_batch, seed) -> NavEnv`, a picklable per-scene env factory
+that the composition root builds over the set's prepared folders (`compose/scene_sets.py`), so this
+module never reads a scene from disk. Training steps a `MultiSceneNavEnv` over all scenes (built by
+the collectors from `multi_scene_env_fn`); `SceneSetEvaluation` evaluates every scene's split once and
+reports rows overall, indoor/outdoor and `scene/<id>`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from typing import Callable, Sequence
+
+from torchrl.envs import EnvBase
+
+from wanderland_nav.envs.evaluation import EvaluationResult, run_evaluation
+from wanderland_nav.envs.metrics import EpisodeMetrics, format_table
+from wanderland_nav.envs.multi_scene import MultiSceneNavEnv, aggregate_by_scene
+
+SceneEnvFn = Callable[[str, int, int], EnvBase]  # (scene_id, sub_batch, seed) -> NavEnv
+
+
+def default_num_active(batch_size: int, num_scenes: int) -> int:
+    """The most scenes stepped at once that split `batch_size` evenly (at most `num_scenes`)."""
+    return max(k for k in range(1, min(batch_size, num_scenes) + 1) if batch_size % k == 0)
+
+
+def multi_scene_env_fn(scene_ids: Sequence[str], scene_env: SceneEnvFn, *, batch_size: int, num_active: int | None,
+                       device: str = "cpu", memory_budget_gb: float | None = None,
+                       seed: int = 0) -> Callable[[], MultiSceneNavEnv]:
+    """A picklable `() -> MultiSceneNavEnv` of `batch_size` agents, `num_active` scenes at a time
+    (null: `default_num_active`), loaded scenes kept within `memory_budget_gb` (null: all kept)."""
+    num_active = int(num_active or default_num_active(batch_size, len(scene_ids)))
+    budget = None if memory_budget_gb is None else int(float(memory_budget_gb) * 1024**3)
+    return partial(MultiSceneNavEnv, list(scene_ids), scene_env, batch_size=[int(batch_size)], num_active=num_active,
+                   memory_budget_bytes=budget, seed=seed, device=device)
+
+
+@dataclass
+class SceneSetEvaluation:
+    """Evaluation over a set: each scene's split, every episode once (or `num_episodes` per scene)."""
+
+    scene_ids: list[str]
+    scene_env: SceneEnvFn
+    batch_size: int
+
+    def run(self, policy, num_episodes: int | None = None, *, seed: int = 0, name: str = "policy",
+            progress: bool = False) -> EvaluationResult:
+        """`policy`: a TensorDict -> TensorDict callable, or a `NavEnv -> policy` factory flagged with
+        `policy.per_env = True` (references such as the expert read their env)."""
+        by_scene: dict[str, list[EpisodeMetrics]] = {}
+        records = []
+        for sid in self.scene_ids:
+            env = self.scene_env(sid, self.batch_size, seed)
+            actor = policy(env) if getattr(policy, "per_env", False) else policy
+            res = run_evaluation(env, actor, num_episodes, seed=seed, name=f"{name}/{sid}", progress=progress)
+            env.close()
+            by_scene[sid] = [EpisodeMetrics(**r) for r in res.records]
+            records += [{**r, "scene_id": sid} for r in res.records]
+        summary = aggregate_by_scene(by_scene)
+        return EvaluationResult(records, summary, format_table({f"{name}/{g}": r for g, r in summary.items()}))
+
+    def close(self) -> None:
+        """Nothing to release: each scene's env is built for one run and closed after it."""
