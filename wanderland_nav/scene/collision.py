@@ -199,39 +199,30 @@ def load_collision_mesh(path) -> trimesh.Trimesh:
     return mesh
 
 
-def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,
-                           crop_radius: float = 15.0, height_band: tuple[float, float] = (-4.0, 4.0),
-                           min_component_faces: int = 50, *, settings: CollisionSettings | None = None,
-                           ) -> trimesh.Trimesh:
-    """Collision mesh (scene frame, metres) from `points [N,3]` and capture positions `camera_centers [M,3]`.
-
-    `settings` (a `CollisionSettings`) overrides the keyword arguments when given. The returned mesh
-    carries `metadata["collision"]` with the settings, point counts, grid shape and timings.
-    """
-    cfg = settings or CollisionSettings(voxel_size=voxel_size, crop_radius=crop_radius,
-                                        height_band=tuple(height_band), min_component_faces=min_component_faces)
+def _check_inputs(points, camera_centers, up_axis: str, cfg: CollisionSettings
+                  ) -> tuple[str, np.ndarray, np.ndarray]:
+    """Validate settings and inputs before any heavy work, so a bad call fails at once with the message
+    naming what is wrong. Returns `(up, points [N,3] as given, camera centres [M,3] float64)`, scene frame."""
     if cfg.voxel_size <= 0 or cfg.crop_radius <= 0:
         raise ValueError(f"voxel_size and crop_radius must be positive, got {cfg.voxel_size}, {cfg.crop_radius}")
     up = parse_up_axis(up_axis)
-    R = nav_from_scene_rotation(up).astype(np.float32)  # nav_from_scene
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must be [N,3], got {pts.shape}")
     cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3)
     if not np.isfinite(cams).all():
         raise ValueError("camera_centers contain non-finite values")
-    t0 = time.perf_counter()
-    timings = {}
+    return up, pts, cams
 
-    # 1. voxelise every finite point in the nav frame, chunk by chunk (the rotated cloud is never
-    #    held whole): pass A finds the bounds, pass B the occupied voxel keys and their counts.
-    vox = float(cfg.voxel_size)
-    Rn = nav_from_scene_rotation(up)
+
+def _nav_bounds(pts: np.ndarray, R: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pass A of voxelisation: nav-frame `(lo [3], hi [3])` of the finite points, chunk by chunk so the
+    rotated cloud (`R` float32 nav_from_scene) is never held whole. Non-finite points are counted and dropped."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     n_bad = 0
-    for s in range(0, pts.shape[0], cfg.chunk_points):
-        c = pts[s:s + cfg.chunk_points].astype(np.float32) @ R.T
+    for s in range(0, pts.shape[0], chunk):
+        c = pts[s:s + chunk].astype(np.float32) @ R.T
         ok = np.isfinite(c).all(-1)
         n_bad += int((~ok).sum())
         if ok.any():
@@ -241,12 +232,20 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
         log.warning("dropping %d non-finite points", n_bad)
     if not np.isfinite(lo).all():
         raise ValueError(f"no finite points among {pts.shape[0]}")
+    return lo, hi
+
+
+def _occupied_voxels(pts: np.ndarray, R: np.ndarray, lo: np.ndarray, hi: np.ndarray, vox: float, chunk: int,
+                     min_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pass B of voxelisation: `(ijk [K,3] int64, counts [K] int64)` of the voxels (global nav-frame key
+    space from `lo`) holding at least `min_points` finite points. Keys are linear indices into a grid that
+    is never allocated densely; per-chunk uniques are merged, so memory scales with occupied voxels."""
     gdims = np.floor((hi - lo) / vox).astype(np.int64) + 1  # global key space (never allocated densely)
     if float(np.prod(gdims.astype(np.float64))) > 2.0**62:
         raise ValueError(f"point cloud extent {(hi - lo).tolist()} m is too large for voxel_size {vox}")
     keys_l, counts_l = [], []
-    for s in range(0, pts.shape[0], cfg.chunk_points):
-        c = pts[s:s + cfg.chunk_points].astype(np.float32) @ R.T
+    for s in range(0, pts.shape[0], chunk):
+        c = pts[s:s + chunk].astype(np.float32) @ R.T
         c = c[np.isfinite(c).all(-1)]
         ijk = np.clip(np.floor((c - lo) / vox).astype(np.int64), 0, gdims - 1)
         u, cnt = np.unique((ijk[:, 0] * gdims[1] + ijk[:, 1]) * gdims[2] + ijk[:, 2], return_counts=True)
@@ -254,26 +253,17 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
         counts_l.append(cnt)
     keys, inv = np.unique(np.concatenate(keys_l), return_inverse=True)
     counts = np.bincount(inv.reshape(-1), weights=np.concatenate(counts_l)).astype(np.int64)
-    dense_enough = counts >= cfg.min_points_per_voxel
+    dense_enough = counts >= min_points
     keys, counts = keys[dense_enough], counts[dense_enough]
     ijk = np.stack([keys // (gdims[1] * gdims[2]), (keys // gdims[2]) % gdims[1], keys % gdims[2]], -1)
-    timings["voxelize_s"] = time.perf_counter() - t0
+    return ijk, counts
 
-    # 2. crop at voxel resolution: one KD query per occupied voxel instead of per point
-    t1 = time.perf_counter()
-    centres = (lo + (ijk + 0.5) * vox).astype(np.float32)
-    keep = crop_to_trajectory(centres, cams @ Rn.T, cfg.crop_radius, cfg.height_band, cfg.chunk_points)
-    ijk = ijk[keep]
-    meta = {"settings": cfg.as_dict(), "up_axis": up, "points_in": int(pts.shape[0]),
-            "points_kept": int(counts[keep].sum())}
-    timings["crop_s"] = time.perf_counter() - t1
-    if ijk.shape[0] == 0:
-        raise ValueError(f"no points left after cropping {pts.shape[0]} points to radius {cfg.crop_radius} m and "
-                         f"height band {cfg.height_band} around {cams.shape[0]} capture positions "
-                         f"(wrong up axis '{up}'?)")
 
-    # dense occupancy over the cropped voxels' box, padded so surfaces close at the border
-    t2 = time.perf_counter()
+def _occupancy_grid(ijk: np.ndarray, lo: np.ndarray, vox: float, cfg: CollisionSettings, meta: dict
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dense bool occupancy over the cropped voxels' box (not over the whole cloud), padded so surfaces
+    close at the border, with ground infill and binary closing applied. Returns `(grid [X,Y,Z] bool,
+    dims [3], origin [3])`, origin = nav-frame corner of local voxel (0,0,0). Adds ground-fill stats to `meta`."""
     pad = 1 + cfg.close_iterations
     imin = ijk.min(0)
     dims = ijk.max(0) - imin + 1 + 2 * pad
@@ -295,6 +285,59 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
                  fill.filled_area_m2, fill.ground_columns, fill.obstacle_columns)
     if cfg.close_iterations > 0:
         grid = ndi.binary_closing(grid, iterations=cfg.close_iterations)
+    return grid, dims, origin
+
+
+def _filter_faces(verts_nav: np.ndarray, faces: np.ndarray, cams_nav: np.ndarray, cfg: CollisionSettings,
+                  meta: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Drop hidden ceiling/roof tops (only when capture positions exist), then small components; nav frame.
+    Returns the reindexed `(verts [V,3], faces [F,3])`; records the hidden-top count in `meta`."""
+    if cfg.drop_tops_above_capture is not None and cams_nav.shape[0]:
+        keep_f = ~unseen_top_faces(verts_nav, faces, cams_nav, cfg.drop_tops_above_capture)
+        meta["hidden_top_faces_dropped"] = int((~keep_f).sum())
+        faces = faces[keep_f]
+    return drop_small_components(verts_nav, faces, cfg.min_component_faces)
+
+
+def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,
+                           crop_radius: float = 15.0, height_band: tuple[float, float] = (-4.0, 4.0),
+                           min_component_faces: int = 50, *, settings: CollisionSettings | None = None,
+                           ) -> trimesh.Trimesh:
+    """Collision mesh (scene frame, metres) from `points [N,3]` and capture positions `camera_centers [M,3]`.
+
+    `settings` (a `CollisionSettings`) overrides the keyword arguments when given. The returned mesh
+    carries `metadata["collision"]` with the settings, point counts, grid shape and timings.
+    """
+    cfg = settings or CollisionSettings(voxel_size=voxel_size, crop_radius=crop_radius,
+                                        height_band=tuple(height_band), min_component_faces=min_component_faces)
+    up, pts, cams = _check_inputs(points, camera_centers, up_axis, cfg)
+    R = nav_from_scene_rotation(up).astype(np.float32)  # nav_from_scene, float32 for the point passes
+    Rn = nav_from_scene_rotation(up)  # float64, for centres and the final rotation back
+    t0 = time.perf_counter()
+    timings = {}
+
+    # 1. voxelise every finite point in the nav frame (two chunked passes: bounds, then occupied keys)
+    vox = float(cfg.voxel_size)
+    lo, hi = _nav_bounds(pts, R, cfg.chunk_points)
+    ijk, counts = _occupied_voxels(pts, R, lo, hi, vox, cfg.chunk_points, cfg.min_points_per_voxel)
+    timings["voxelize_s"] = time.perf_counter() - t0
+
+    # 2. crop at voxel resolution: one KD query per occupied voxel instead of per point
+    t1 = time.perf_counter()
+    centres = (lo + (ijk + 0.5) * vox).astype(np.float32)
+    keep = crop_to_trajectory(centres, cams @ Rn.T, cfg.crop_radius, cfg.height_band, cfg.chunk_points)
+    ijk = ijk[keep]
+    meta = {"settings": cfg.as_dict(), "up_axis": up, "points_in": int(pts.shape[0]),
+            "points_kept": int(counts[keep].sum())}
+    timings["crop_s"] = time.perf_counter() - t1
+    if ijk.shape[0] == 0:
+        raise ValueError(f"no points left after cropping {pts.shape[0]} points to radius {cfg.crop_radius} m and "
+                         f"height band {cfg.height_band} around {cams.shape[0]} capture positions "
+                         f"(wrong up axis '{up}'?)")
+
+    # dense occupancy over the cropped voxels' box, padded so surfaces close at the border
+    t2 = time.perf_counter()
+    grid, dims, origin = _occupancy_grid(ijk, lo, vox, cfg, meta)
     timings["grid_s"] = time.perf_counter() - t2
 
     # 3. marching cubes, slab by slab
@@ -311,11 +354,7 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
 
     # 4. hidden tops, then small components
     t4 = time.perf_counter()
-    if cfg.drop_tops_above_capture is not None and cams.shape[0]:
-        keep_f = ~unseen_top_faces(verts_nav, faces, cams @ Rn.T, cfg.drop_tops_above_capture)
-        meta["hidden_top_faces_dropped"] = int((~keep_f).sum())
-        faces = faces[keep_f]
-    verts_nav, faces = drop_small_components(verts_nav, faces, cfg.min_component_faces)
+    verts_nav, faces = _filter_faces(verts_nav, faces, cams @ Rn.T, cfg, meta)
     timings["components_s"] = time.perf_counter() - t4
     meta["faces_before_filter"] = n_before
     verts_scene = verts_nav @ Rn  # row form of R^T p (R orthonormal)
