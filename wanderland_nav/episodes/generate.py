@@ -132,6 +132,127 @@ def assign_splits(n: int, fractions: tuple[float, float, float], rng: np.random.
 # --------------------------------------------------------------------------- library entry
 
 
+@dataclass
+class _RouteGeometry:
+    """The per-episode geometry every later stage reads, rounded once to `decimals` so the file,
+    the instructions and the summary all see the same numbers."""
+
+    corners: list[np.ndarray]  # E x [K, 3] shortest-path corners, scene frame, rounded
+    corners_nav: list[np.ndarray]  # E x [K, 3] the same corners in the nav frame (z up)
+    geodesic: np.ndarray  # [E] path length in metres, rounded
+    yaw0: np.ndarray  # [E] start heading (nav frame, radians)
+    yaw_goal: np.ndarray  # [E] heading along the last segment (nav frame), for the goal image
+    q_wxyz: np.ndarray  # [E, 4] start rotation in the scene frame, rounded to 7 places
+    radius: np.ndarray  # [E] success radius around the goal, rounded to mm
+
+
+def _dense_expert_locations(scene, navmesh, paths, R_ns: np.ndarray,
+                            step_size: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Dense, on-surface expert locations (E x [S_i, 3], scene frame) and their indoor flags (E x [S_i]).
+
+    One snap and one indoor query for all episodes together, because both are per-call expensive.
+    """
+    E = len(paths)
+    # dense, on-surface expert locations for every episode in one snap call
+    # every step_size metres on the ground plane (nav frame), back to the scene frame
+    dense = [resample_polyline(p @ R_ns.T, step_size, horizontal=True) @ R_ns for p in paths]
+    counts = np.array([len(d) for d in dense], dtype=np.int64)
+    flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
+    if len(flat):
+        # heights from the navmesh surface: the linear interpolation between corners is on the mesh
+        # horizontally (the funnel path stays inside its corridor) but not vertically on slopes
+        flat = np.asarray(navmesh.snap_point(flat, max_distance=1e9), dtype=np.float64)
+        indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
+    else:
+        indoor_flat = np.zeros(0, dtype=bool)
+    offs = np.concatenate([[0], np.cumsum(counts)])
+    dense = [flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
+    indoor = [indoor_flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
+    return dense, indoor
+
+
+def _route_geometry(paths, R_ns: np.ndarray, up: str, settings: GeneratorSettings) -> _RouteGeometry:
+    """Corners, lengths, headings, start rotations and goal radii of the sampled shortest paths."""
+    E, dec = len(paths), settings.decimals
+    corners = [np.round(p, dec) for p in paths]
+    corners_nav = [c @ R_ns.T for c in corners]
+    geodesic = np.array([round(polyline_length(c), dec) for c in corners])
+    yaw0 = np.array([first_heading_nav(c) for c in corners_nav])
+    yaw_goal = np.array([last_heading_nav(c) for c in corners_nav])
+    q_wxyz = np.round(rotation_from_yaw(yaw0, up).reshape(E, 4), 7)
+    radius = np.round(settings.sampler.goal_radius_for(geodesic), 3)
+    return _RouteGeometry(corners=corners, corners_nav=corners_nav, geodesic=geodesic, yaw0=yaw0,
+                          yaw_goal=yaw_goal, q_wxyz=q_wxyz, radius=radius)
+
+
+def _point_goal_polar(pairs, R_ns: np.ndarray, yaw0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Point goal in polar form relative to the start pose (nav frame): rho [E] horizontal metres,
+    phi [E] radians counter-clockwise from the start heading (left > 0)."""
+    E = len(pairs.starts)
+    d_nav = (pairs.goals - pairs.starts) @ R_ns.T if E else np.zeros((0, 3))
+    rho = np.linalg.norm(d_nav[:, :2], axis=-1)
+    phi = wrap_angle(np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0)
+    return rho, phi
+
+
+def _goal_images(scene, sampler: EndpointSampler, geo: _RouteGeometry, R_ns: np.ndarray,
+                 settings: GeneratorSettings, goal_image_dir: Path) -> list[Path | None]:
+    """Render one goal view per episode (at the goal, facing along the last path segment) into
+    `goal_image_dir/<i:05d>.png`; -> the E written paths. Caller checks that images are wanted."""
+    E = len(geo.corners)
+    height = settings.goal_camera_height or float(np.clip(np.median(sampler.camera_heights), 0.3, 3.0))
+    return render_goal_images(
+        scene.gaussians_path, np.stack([c[-1] for c in geo.corners_nav]), geo.yaw_goal, R_ns,
+        [goal_image_dir / f"{i:05d}.png" for i in range(E)], height=height,
+        width=settings.goal_image_width, image_height=settings.goal_image_height,
+        hfov_deg=settings.goal_image_hfov_deg, device=settings.render_device)
+
+
+def _instruction_texts(scene, instructions: InstructionGenerator, geo: _RouteGeometry, dense, indoor,
+                       R_ns: np.ndarray, goal_paths: list[Path | None], seed: int) -> list[str]:
+    """One instruction per route. Each route gets its own child seed of `seed`, so a generator's
+    randomness does not depend on how many episodes came before it."""
+    E = len(geo.corners)
+    child_seeds = np.random.SeedSequence(seed).spawn(E) if E else []
+    routes = [Route(corners_nav=geo.corners_nav[i], dense_nav=dense[i] @ R_ns.T, indoor=indoor[i],
+                    geodesic_distance=float(geo.geodesic[i]), seed=int(child_seeds[i].generate_state(1)[0]),
+                    goal_image=goal_paths[i], scene_name=scene.name) for i in range(E)]
+    texts = instructions(routes) if E else []
+    if len(texts) != E:
+        raise ValueError(f"instruction generator {getattr(instructions, 'name', instructions)!r} returned "
+                         f"{len(texts)} texts for {E} routes")
+    return texts
+
+
+def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, splits: list[str], rho, phi,
+                       goal_paths: list[Path | None], goal_image_dir: Path | None, texts: list[str],
+                       dec: int) -> list[Episode]:
+    """Build and validate the `Episode` records (every written number rounded to `dec` places)."""
+    episodes = []
+    for i in range(len(geo.corners)):
+        extras: dict[str, Any] = {
+            "split": splits[i],
+            "up_axis": scene.up_axis,
+            "euclidean_distance": round(float(pairs.euclidean[i]), dec),
+            "island": int(pairs.island[i]),
+            "point_goal_polar": [round(float(rho[i]), dec), round(float(phi[i]), 6)],
+        }
+        if goal_paths[i] is not None:
+            extras["goal_image"] = f"{goal_image_dir.name}/{goal_paths[i].name}"
+        ep = Episode(
+            episode_id=i, scene_id=scene.name,
+            start_position=geo.corners[i][0], start_rotation_wxyz=geo.q_wxyz[i],
+            geodesic_distance=float(geo.geodesic[i]),
+            goals=[Goal(position=geo.corners[i][-1], radius=float(geo.radius[i]))],
+            instruction_text=texts[i],
+            reference_path=geo.corners[i], gt_locations=np.round(dense[i], dec), gt_steps=int(len(dense[i]) - 1),
+            extras=extras,
+        )
+        ep.validate(where=f"{scene.name}: episodes[{i}]")
+        episodes.append(ep)
+    return episodes
+
+
 def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
                       settings: GeneratorSettings | None = None,
                       instructions: InstructionGenerator | None = None,
@@ -149,91 +270,31 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     if num_episodes < 0:
         raise ValueError(f"num_episodes must be >= 0, got {num_episodes}")
     t0 = time.perf_counter()
+    # the draws from `rng` are, in this order: endpoint sampling, then the split permutation
     rng = np.random.default_rng(seed)
     R_ns = np.asarray(scene.nav_from_scene, dtype=np.float64)  # [3, 3]
-    up = scene.up_axis
     sampler = EndpointSampler(navmesh, scene.capture_positions(), R_ns, settings.sampler)
     pairs = sampler.sample(num_episodes, rng, progress=progress)
     E = len(pairs.starts)
-    dec = settings.decimals
 
-    # dense, on-surface expert locations for every episode in one snap call
-    # every step_size metres on the ground plane (nav frame), back to the scene frame
-    dense = [resample_polyline(p @ R_ns.T, settings.step_size, horizontal=True) @ R_ns for p in pairs.paths]
-    counts = np.array([len(d) for d in dense], dtype=np.int64)
-    flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
-    if len(flat):
-        # heights from the navmesh surface: the linear interpolation between corners is on the mesh
-        # horizontally (the funnel path stays inside its corridor) but not vertically on slopes
-        flat = np.asarray(navmesh.snap_point(flat, max_distance=1e9), dtype=np.float64)
-        indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
-    else:
-        indoor_flat = np.zeros(0, dtype=bool)
-    offs = np.concatenate([[0], np.cumsum(counts)])
-    dense = [flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
-    indoor = [indoor_flat[a:b] for a, b in zip(offs[:-1], offs[1:])]
-
-    corners = [np.round(p, dec) for p in pairs.paths]
-    corners_nav = [c @ R_ns.T for c in corners]
-    geodesic = np.array([round(polyline_length(c), dec) for c in corners])
-    yaw0 = np.array([first_heading_nav(c) for c in corners_nav])
-    yaw_goal = np.array([last_heading_nav(c) for c in corners_nav])
-    q_wxyz = np.round(rotation_from_yaw(yaw0, up).reshape(E, 4), 7)
-    radius = np.round(settings.sampler.goal_radius_for(geodesic), 3)
+    dense, indoor = _dense_expert_locations(scene, navmesh, pairs.paths, R_ns, settings.step_size)
+    geo = _route_geometry(pairs.paths, R_ns, scene.up_axis, settings)
     splits = assign_splits(E, settings.splits, rng)
-
-    # point goal in polar form relative to the start pose (nav frame): rho horizontal metres,
-    # phi radians counter-clockwise from the start heading (left > 0)
-    d_nav = (pairs.goals - pairs.starts) @ R_ns.T if E else np.zeros((0, 3))
-    rho = np.linalg.norm(d_nav[:, :2], axis=-1)
-    phi = wrap_angle(np.arctan2(d_nav[:, 1], d_nav[:, 0]) - yaw0)
+    rho, phi = _point_goal_polar(pairs, R_ns, geo.yaw0)
 
     goal_paths: list[Path | None] = [None] * E
     if goal_image_dir is not None and settings.goal_images and E:
         goal_image_dir = Path(goal_image_dir)
-        height = settings.goal_camera_height or float(np.clip(np.median(sampler.camera_heights), 0.3, 3.0))
-        goal_paths = render_goal_images(
-            scene.gaussians_path, np.stack([c[-1] for c in corners_nav]), yaw_goal, R_ns,
-            [goal_image_dir / f"{i:05d}.png" for i in range(E)], height=height,
-            width=settings.goal_image_width, image_height=settings.goal_image_height,
-            hfov_deg=settings.goal_image_hfov_deg, device=settings.render_device)
+        goal_paths = _goal_images(scene, sampler, geo, R_ns, settings, goal_image_dir)
 
-    child_seeds = np.random.SeedSequence(seed).spawn(E) if E else []
-    routes = [Route(corners_nav=corners_nav[i], dense_nav=dense[i] @ R_ns.T, indoor=indoor[i],
-                    geodesic_distance=float(geodesic[i]), seed=int(child_seeds[i].generate_state(1)[0]),
-                    goal_image=goal_paths[i], scene_name=scene.name) for i in range(E)]
-    texts = instructions(routes) if E else []
-    if len(texts) != E:
-        raise ValueError(f"instruction generator {getattr(instructions, 'name', instructions)!r} returned "
-                         f"{len(texts)} texts for {E} routes")
-
-    episodes = []
-    for i in range(E):
-        extras: dict[str, Any] = {
-            "split": splits[i],
-            "up_axis": up,
-            "euclidean_distance": round(float(pairs.euclidean[i]), dec),
-            "island": int(pairs.island[i]),
-            "point_goal_polar": [round(float(rho[i]), dec), round(float(phi[i]), 6)],
-        }
-        if goal_paths[i] is not None:
-            extras["goal_image"] = f"{goal_image_dir.name}/{goal_paths[i].name}"
-        ep = Episode(
-            episode_id=i, scene_id=scene.name,
-            start_position=corners[i][0], start_rotation_wxyz=q_wxyz[i],
-            geodesic_distance=float(geodesic[i]),
-            goals=[Goal(position=corners[i][-1], radius=float(radius[i]))],
-            instruction_text=texts[i],
-            reference_path=corners[i], gt_locations=np.round(dense[i], dec), gt_steps=int(len(dense[i]) - 1),
-            extras=extras,
-        )
-        ep.validate(where=f"{scene.name}: episodes[{i}]")
-        episodes.append(ep)
+    texts = _instruction_texts(scene, instructions, geo, dense, indoor, R_ns, goal_paths, seed)
+    episodes = _assemble_episodes(scene, pairs, geo, dense, splits, rho, phi, goal_paths, goal_image_dir,
+                                  texts, settings.decimals)
 
     rej = {r: int(pairs.rejections.get(r, 0)) for r in REJECTION_REASONS}
     summary = GenerationSummary(
         scene=scene.name, requested=num_episodes, kept=E, candidates=pairs.candidates, rounds=pairs.rounds,
-        rejections=rej, length_hist=length_histogram(geodesic),
+        rejections=rej, length_hist=length_histogram(geo.geodesic),
         splits={s: splits.count(s) for s in ("train", "val", "test")}, seconds=time.perf_counter() - t0)
     return episodes, summary
 

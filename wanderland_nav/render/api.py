@@ -82,25 +82,12 @@ def rasterization(
     lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
     packed path's hot stages through torch.compile (`compiled.py`; eager fallback with one warning).
     """
-    _check(packed or not compiled, "compiled=True is a variant of the packed fast path; pass packed=True")
-    _check(render_mode in RENDER_MODES, f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
-    _check(rasterize_mode in RASTERIZE_MODES, f"rasterize_mode must be one of {RASTERIZE_MODES}, got {rasterize_mode!r}")
-    _check(camera_model in CAMERA_MODELS, f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
-    for flag, name in ((sparse_grad, "sparse_grad"), (absgrad, "absgrad"), (distributed, "distributed"),
-                       (with_ut, "with_ut"), (with_eval3d, "with_eval3d")):
-        if flag:
-            raise NotImplementedError(f"rasterization: {name}=True is not supported by the pure-PyTorch renderer")
-    for t, name in ((radial_coeffs, "radial_coeffs"), (tangential_coeffs, "tangential_coeffs"),
-                    (thin_prism_coeffs, "thin_prism_coeffs")):
-        if t is not None:
-            raise NotImplementedError(f"rasterization: {name} (lens distortion) is not supported")
-    batch, N, C, covars, per_camera = _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
-                                                    backgrounds, sh_degree, width, height)
-    dtype = means.dtype
-    viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
-    if tile_size is None:
-        tile_size = 4 if means.device.type == "cpu" else 16
-    _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
+    _check_options(packed=packed, compiled=compiled, render_mode=render_mode, rasterize_mode=rasterize_mode,
+                   camera_model=camera_model, sparse_grad=sparse_grad, absgrad=absgrad, distributed=distributed,
+                   with_ut=with_ut, with_eval3d=with_eval3d, radial_coeffs=radial_coeffs,
+                   tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs)
+    batch, C, covars, per_camera, viewmats, Ks, tile_size = _normalise_inputs(
+        means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width, height, tile_size)
     B = math.prod(batch)
     flat = lambda t: t.reshape((B,) + t.shape[len(batch):]) if t is not None else None  # noqa: E731  [B, ...]
     opts = dict(width=int(width), height=int(height), near_plane=near_plane, far_plane=far_plane,
@@ -117,6 +104,38 @@ def rasterization(
                                                for k, v in outs[0][2].items()}
     shape = lambda t: t.reshape(batch + (C,) + t.shape[-3:])  # noqa: E731  [B*C or B, C, H, W, X] -> [..., C, H, W, X]
     return shape(colors_out), shape(alphas), meta
+
+
+def _check_options(*, packed, compiled, render_mode, rasterize_mode, camera_model, sparse_grad, absgrad,
+                   distributed, with_ut, with_eval3d, radial_coeffs, tangential_coeffs, thin_prism_coeffs) -> None:
+    """Reject unknown modes, and gsplat options that would change results but are not implemented
+    here (raise rather than silently ignore them). Checked before any shape, in this order."""
+    _check(packed or not compiled, "compiled=True is a variant of the packed fast path; pass packed=True")
+    _check(render_mode in RENDER_MODES, f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
+    _check(rasterize_mode in RASTERIZE_MODES, f"rasterize_mode must be one of {RASTERIZE_MODES}, got {rasterize_mode!r}")
+    _check(camera_model in CAMERA_MODELS, f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
+    for flag, name in ((sparse_grad, "sparse_grad"), (absgrad, "absgrad"), (distributed, "distributed"),
+                       (with_ut, "with_ut"), (with_eval3d, "with_eval3d")):
+        if flag:
+            raise NotImplementedError(f"rasterization: {name}=True is not supported by the pure-PyTorch renderer")
+    for t, name in ((radial_coeffs, "radial_coeffs"), (tangential_coeffs, "tangential_coeffs"),
+                    (thin_prism_coeffs, "thin_prism_coeffs")):
+        if t is not None:
+            raise NotImplementedError(f"rasterization: {name} (lens distortion) is not supported")
+
+
+def _normalise_inputs(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
+                      height, tile_size):
+    """Validate shapes, build covars [..., N, 3, 3] if needed, cast cameras to the means' dtype and pick
+    the device's default tile size; -> (batch, C, covars, per_camera, viewmats [..., C, 4, 4], Ks [..., C, 3, 3], tile_size)."""
+    batch, _, C, covars, per_camera = _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
+                                                    backgrounds, sh_degree, width, height)
+    dtype = means.dtype
+    viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
+    if tile_size is None:
+        tile_size = 4 if means.device.type == "cpu" else 16
+    _check(isinstance(tile_size, int) and tile_size >= 1, f"tile_size must be a positive int, got {tile_size!r}")
+    return batch, C, covars, per_camera, viewmats, Ks, tile_size
 
 
 def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
