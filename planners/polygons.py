@@ -239,17 +239,15 @@ def _simplify_ring(pts: np.ndarray, lab: np.ndarray, tol: float, use_dp: bool):
 # --------------------------------------------------------------------------- mesh
 
 
-def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
-    """Polygonise each region, triangulate it (constrained Delaunay) and stitch the regions."""
-    span_region = split_regions(cf)
+def _region_lookup(cf: CompactField, span_region: np.ndarray):
+    """Index spans by (region, column) so that contour stages can ask "which span of region r covers
+    cell (cx, cy)?" with one vectorised searchsorted. Returns lookup(r, cx[K], cy[K]) -> span id [K] or -1
+    (cells off the grid or not in region r)."""
     N = len(cf.col)
     ncols = cf.width * cf.height
-    R = int(span_region.max()) + 1 if N else 0
     key = span_region * ncols + cf.col
     order = np.argsort(key)
     skey = key[order]
-    region_island = np.zeros(R, np.int64)
-    region_island[span_region] = cf.island
 
     def lookup(r, cx, cy):
         ok = (cx >= 0) & (cy >= 0) & (cx < cf.width) & (cy < cf.height)
@@ -258,14 +256,15 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
         hit = ok & (skey[j] == k) if N else ok & False
         return np.where(hit, order[j], -1)
 
-    V_xy, V_fl, T_v, T_reg = [], [], [], []
-    ring_nb = {}  # vertex id -> (xy, region, ring prev, ring next)
-    seg_lab = []  # per region: dict (p,q) -> label
-    nodes = []  # (xy, region, prev, next)
-    nv = 0
+    return lookup
+
+
+def _raw_contours(cf: CompactField, span_region: np.ndarray, R: int, lookup) -> list:
+    """Pass 1: each region's outline as unit-step rings along cell corners, with the label (WALL or
+    region across) of every unit edge. Returns [(region, span ids[S], [dense rings[L,2]], [labels[L]])],
+    one entry per connected polygon of a region (exterior first, then holes)."""
     ix, iy = cf.ix, cf.iy
-    # pass 1: raw contours and the label of every unit edge
-    raw = []  # (region, [dense rings], [labels])
+    raw = []
     for r in range(R):
         sel = np.nonzero(span_region == r)[0]
         boxes = shapely.box(ix[sel], iy[sel], ix[sel] + 1, iy[sel] + 1)
@@ -275,101 +274,122 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
             rings_raw = [np.asarray(poly.exterior.coords)] + [np.asarray(h.coords) for h in poly.interiors]
             dens = [_densify(rr) for rr in rings_raw]
             raw.append((r, sel, dens, [_ring_labels(p, r, lookup, cf.link, span_region) for p in dens]))
-    # pass 2: a portal must be seen from both sides (links are first-match, so not always
-    # symmetric); one-sided portal edges become walls on both sides, so both rings agree
+    return raw
+
+
+def _drop_one_sided_portals(raw: list, height: int) -> None:
+    """Pass 2 (in place on the label arrays of `raw`): a portal must be seen from both sides (links are
+    first-match, so not always symmetric); one-sided portal edges become walls on both sides, so both
+    rings agree. Edges are keyed by their corner ids (x * (height + 1) + y)."""
     portal = set()
     for r, _, dens, labs in raw:
         for p_, l_ in zip(dens, labs):
-            a = p_[:, 0].astype(np.int64) * (cf.height + 1) + p_[:, 1].astype(np.int64)
+            a = p_[:, 0].astype(np.int64) * (height + 1) + p_[:, 1].astype(np.int64)
             b = np.roll(a, -1)
             for k in np.nonzero(l_ >= 0)[0]:
                 portal.add((r, int(l_[k]), min(int(a[k]), int(b[k])), max(int(a[k]), int(b[k]))))
     for r, _, dens, labs in raw:
         for p_, l_ in zip(dens, labs):
-            a = p_[:, 0].astype(np.int64) * (cf.height + 1) + p_[:, 1].astype(np.int64)
+            a = p_[:, 0].astype(np.int64) * (height + 1) + p_[:, 1].astype(np.int64)
             b = np.roll(a, -1)
             for k in np.nonzero(l_ >= 0)[0]:
                 if (int(l_[k]), r, min(int(a[k]), int(b[k])), max(int(a[k]), int(b[k]))) not in portal:
                     l_[k] = WALL
-    # pass 3: simplify, triangulate
-    for r, sel, dens, labs in raw:
-        for use_dp in (True, False):
-            simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
-            if any(len(s_[0]) < 3 for s_ in simp):
-                continue  # a ring collapsed under simplification: keep the exact contour
-            cand = shapely.Polygon(simp[0][0], [s_[0] for s_ in simp[1:]])
-            if cand.is_valid:
-                break
-        tri_geom = shapely.constrained_delaunay_triangles(cand)
-        tri_xy = shapely.get_coordinates(tri_geom.geoms if hasattr(tri_geom, "geoms") else tri_geom)
-        tri_xy = tri_xy.reshape(-1, 4, 2)[:, :3]
-        ring_pts = np.concatenate([s[0] for s in simp])
-        vid = {(float(x), float(y)): nv + i for i, (x, y) in enumerate(ring_pts)}
-        try:
-            tv = np.array([[vid[(float(x), float(y))] for x, y in t] for t in tri_xy], np.int64)
-        except KeyError as e:  # pragma: no cover - CDT added a Steiner point
-            raise RuntimeError(f"navmesh bake: triangulation of region {r} added vertex {e}") from None
-        # counter-clockwise
-        a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
-        cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        tv = np.where((cr < 0)[:, None], tv[:, [0, 2, 1]], tv)
-        tv = tv[np.abs(cr) > 1e-12]
-        # vertex floors: highest floor of this region's cells touching the corner (Recast's corner height)
-        fl = np.full(len(ring_pts), -np.inf)
-        for dx in (-1, 0):
-            for dy in (-1, 0):
-                sp_ = lookup(r, np.floor(ring_pts[:, 0]).astype(np.int64) + dx,
-                             np.floor(ring_pts[:, 1]).astype(np.int64) + dy)
-                fl = np.where(sp_ >= 0, np.maximum(fl, cf.floor[np.maximum(sp_, 0)]), fl)
-        if not np.all(np.isfinite(fl)):  # corner pulled off the raster by simplification: nearest cell
-            bad = ~np.isfinite(fl)
-            cxy = np.stack([ix[sel], iy[sel]], 1) + 0.5
-            d2 = ((ring_pts[bad][:, None, :] - cxy[None]) ** 2).sum(-1)
-            fl[bad] = cf.floor[sel[np.argmin(d2, 1)]]
-        V_xy.append(ring_pts)
-        V_fl.append(fl)
-        T_v.append(tv)
-        T_reg.append(np.full(len(tv), r))
-        off = 0
-        labels = {}
-        for pts, lab, end in simp:
-            K = len(pts)
-            ids = nv + off + np.arange(K)
-            for i in range(K):
-                labels[(int(ids[i]), int(ids[(i + 1) % K]))] = int(lab[i])
-            # nodes: reflex wall vertices and wall/portal junctions
-            prev_lab = np.roll(lab, 1)
-            p_prev = np.roll(pts, 1, axis=0)
-            p_next = np.roll(pts, -1, axis=0)
-            d1 = pts - p_prev
-            d2 = p_next - pts
-            cr = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-            both_wall = (lab == WALL) & (prev_lab == WALL)
-            junction = (lab == WALL) != (prev_lab == WALL)
-            is_node = (both_wall & (cr < -1e-9)) | junction
-            for i in np.nonzero(is_node)[0]:
-                # junctions: the wall continues in another region, so no tangency test there
-                nodes.append((pts[i], r, p_prev[i], p_next[i], bool(both_wall[i]), int(ids[i])))
-            for i in range(K):
-                ring_nb[int(ids[i])] = (pts[i], r, p_prev[i], p_next[i])
-            off += K
-        seg_lab.append(labels)
-        nv += len(ring_pts)
-    if not V_xy:
-        z2 = np.zeros((0, 2))
-        zi = np.zeros(0, np.int64)
-        return TriMesh(z2, np.zeros(0), np.zeros((0, 3), np.int64), np.zeros((0, 3), np.int64), zi, region_island,
-                       span_region, z2, zi, z2, z2, np.zeros(0, bool), zi)
-    verts_xy = np.concatenate(V_xy)
-    verts_fl = np.concatenate(V_fl)
-    tris = np.concatenate(T_v)
-    tri_region = np.concatenate(T_reg)
+
+
+def _simplify_polygon(dens: list, labs: list, edge_max_error: float, cand):
+    """Simplify every ring of one polygon; Douglas-Peucker first, and when that collapses a ring or makes
+    the polygon invalid, the exact (collinear-dropped) contour. Returns (simp, cand): simp is a list of
+    _simplify_ring outputs per ring, cand the shapely polygon to triangulate. `cand` in is the previous
+    polygon's, returned unchanged if no attempt built one (as the single loop this came from did)."""
+    for use_dp in (True, False):
+        simp = [_simplify_ring(p, l, edge_max_error, use_dp) for p, l in zip(dens, labs)]
+        if any(len(s_[0]) < 3 for s_ in simp):
+            continue  # a ring collapsed under simplification: keep the exact contour
+        cand = shapely.Polygon(simp[0][0], [s_[0] for s_ in simp[1:]])
+        if cand.is_valid:
+            break
+    return simp, cand
+
+
+def _triangulate(cand, ring_pts: np.ndarray, nv: int, r: int) -> np.ndarray:
+    """Constrained Delaunay of one polygon; returns tris[T,3] int64 as global vertex ids (nv + index into
+    ring_pts[K,2]), counter-clockwise, degenerate (zero-area) triangles dropped."""
+    tri_geom = shapely.constrained_delaunay_triangles(cand)
+    tri_xy = shapely.get_coordinates(tri_geom.geoms if hasattr(tri_geom, "geoms") else tri_geom)
+    tri_xy = tri_xy.reshape(-1, 4, 2)[:, :3]
+    vid = {(float(x), float(y)): nv + i for i, (x, y) in enumerate(ring_pts)}
+    try:
+        tv = np.array([[vid[(float(x), float(y))] for x, y in t] for t in tri_xy], np.int64)
+    except KeyError as e:  # pragma: no cover - CDT added a Steiner point
+        raise RuntimeError(f"navmesh bake: triangulation of region {r} added vertex {e}") from None
+    # counter-clockwise
+    a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
+    cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tv = np.where((cr < 0)[:, None], tv[:, [0, 2, 1]], tv)
+    return tv[np.abs(cr) > 1e-12]
+
+
+def _corner_floors(cf: CompactField, r: int, sel: np.ndarray, ring_pts: np.ndarray, lookup) -> np.ndarray:
+    """Floor (cells above bmin[2]) of each ring vertex ring_pts[K,2]: the highest floor of region r's cells
+    touching the corner (Recast's corner height); a corner pulled off the raster by simplification takes
+    the floor of the nearest cell centre among the region's spans `sel`."""
+    fl = np.full(len(ring_pts), -np.inf)
+    for dx in (-1, 0):
+        for dy in (-1, 0):
+            sp_ = lookup(r, np.floor(ring_pts[:, 0]).astype(np.int64) + dx,
+                         np.floor(ring_pts[:, 1]).astype(np.int64) + dy)
+            fl = np.where(sp_ >= 0, np.maximum(fl, cf.floor[np.maximum(sp_, 0)]), fl)
+    if not np.all(np.isfinite(fl)):  # corner pulled off the raster by simplification: nearest cell
+        bad = ~np.isfinite(fl)
+        cxy = np.stack([cf.ix[sel], cf.iy[sel]], 1) + 0.5
+        d2 = ((ring_pts[bad][:, None, :] - cxy[None]) ** 2).sum(-1)
+        fl[bad] = cf.floor[sel[np.argmin(d2, 1)]]
+    return fl
+
+
+def _ring_nodes(simp: list, r: int, nv: int, nodes: list, ring_nb: dict) -> dict:
+    """Per simplified ring of region r (vertex ids from nv on): label each directed edge (id_i, id_i+1),
+    append path nodes (reflex wall vertices and wall/portal junctions) to `nodes` as
+    (xy, region, prev xy, next xy, tangent, vertex id), and record every vertex's ring neighbours in
+    `ring_nb`. Returns {(id_a, id_b): label}."""
+    off = 0
     labels = {}
-    for d in seg_lab:
-        labels.update(d)
-    nbr = _adjacency(tris, tri_region, verts_xy, labels)
-    # a portal edge the other side did not reproduce acts as a wall: its ends must be corners too,
-    # or shortest paths could not bend around it (conservative: never through it)
+    for pts, lab, end in simp:
+        K = len(pts)
+        ids = nv + off + np.arange(K)
+        for i in range(K):
+            labels[(int(ids[i]), int(ids[(i + 1) % K]))] = int(lab[i])
+        # nodes: reflex wall vertices and wall/portal junctions
+        prev_lab = np.roll(lab, 1)
+        p_prev = np.roll(pts, 1, axis=0)
+        p_next = np.roll(pts, -1, axis=0)
+        d1 = pts - p_prev
+        d2 = p_next - pts
+        cr = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        both_wall = (lab == WALL) & (prev_lab == WALL)
+        junction = (lab == WALL) != (prev_lab == WALL)
+        is_node = (both_wall & (cr < -1e-9)) | junction
+        for i in np.nonzero(is_node)[0]:
+            # junctions: the wall continues in another region, so no tangency test there
+            nodes.append((pts[i], r, p_prev[i], p_next[i], bool(both_wall[i]), int(ids[i])))
+        for i in range(K):
+            ring_nb[int(ids[i])] = (pts[i], r, p_prev[i], p_next[i])
+        off += K
+    return labels
+
+
+def _empty_trimesh(region_island: np.ndarray, span_region: np.ndarray) -> TriMesh:
+    """The TriMesh of a field with no polygons: every array empty with the right shape and dtype."""
+    z2 = np.zeros((0, 2))
+    zi = np.zeros(0, np.int64)
+    return TriMesh(z2, np.zeros(0), np.zeros((0, 3), np.int64), np.zeros((0, 3), np.int64), zi, region_island,
+                   span_region, z2, zi, z2, z2, np.zeros(0, bool), zi)
+
+
+def _portal_end_nodes(tris: np.ndarray, nbr: np.ndarray, labels: dict, nodes: list, ring_nb: dict) -> None:
+    """Append to `nodes`: a portal edge the other side did not reproduce acts as a wall: its ends must be
+    corners too, or shortest paths could not bend around it (conservative: never through it)."""
     e_a, e_b = tris.reshape(-1), tris[:, [1, 2, 0]].reshape(-1)
     have = {n[5] for n in nodes}
     for e in np.nonzero(nbr.reshape(-1) < 0)[0]:
@@ -380,6 +400,11 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
                 xy_, r_, pv, nx_ = ring_nb[v]
                 nodes.append((xy_, r_, pv, nx_, False, v))
                 have.add(v)
+
+
+def _node_arrays(nodes: list):
+    """Node tuples -> (node_xy[M,2], node_region[M], node_prev[M,2], node_next[M,2], node_tangent[M],
+    node_vert[M]) arrays, empty with the right dtypes when there are none."""
     if nodes:
         node_xy = np.array([n[0] for n in nodes], np.float64)
         node_region = np.array([n[1] for n in nodes], np.int64)
@@ -391,8 +416,49 @@ def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
         node_xy = node_prev = node_next = np.zeros((0, 2))
         node_region = node_vert = np.zeros(0, np.int64)
         node_tangent = np.zeros(0, bool)
-    return TriMesh(verts_xy, verts_fl, tris, nbr, tri_region, region_island, span_region,
-                   node_xy, node_region, node_prev, node_next, node_tangent, node_vert)
+    return node_xy, node_region, node_prev, node_next, node_tangent, node_vert
+
+
+def build_trimesh(cf: CompactField, edge_max_error: float) -> TriMesh:
+    """Polygonise each region, triangulate it (constrained Delaunay) and stitch the regions."""
+    span_region = split_regions(cf)
+    N = len(cf.col)
+    R = int(span_region.max()) + 1 if N else 0
+    region_island = np.zeros(R, np.int64)
+    region_island[span_region] = cf.island
+    lookup = _region_lookup(cf, span_region)
+
+    V_xy, V_fl, T_v, T_reg = [], [], [], []
+    ring_nb = {}  # vertex id -> (xy, region, ring prev, ring next)
+    seg_lab = []  # per polygon: dict (p,q) -> label
+    nodes = []  # (xy, region, prev, next, tangent, vertex id)
+    nv = 0
+    raw = _raw_contours(cf, span_region, R, lookup)  # pass 1
+    _drop_one_sided_portals(raw, cf.height)  # pass 2
+    # pass 3: simplify, triangulate
+    cand = None
+    for r, sel, dens, labs in raw:
+        simp, cand = _simplify_polygon(dens, labs, edge_max_error, cand)
+        ring_pts = np.concatenate([s[0] for s in simp])
+        tv = _triangulate(cand, ring_pts, nv, r)
+        V_xy.append(ring_pts)
+        V_fl.append(_corner_floors(cf, r, sel, ring_pts, lookup))
+        T_v.append(tv)
+        T_reg.append(np.full(len(tv), r))
+        seg_lab.append(_ring_nodes(simp, r, nv, nodes, ring_nb))
+        nv += len(ring_pts)
+    if not V_xy:
+        return _empty_trimesh(region_island, span_region)
+    verts_xy = np.concatenate(V_xy)
+    verts_fl = np.concatenate(V_fl)
+    tris = np.concatenate(T_v)
+    tri_region = np.concatenate(T_reg)
+    labels = {}
+    for d in seg_lab:
+        labels.update(d)
+    nbr = _adjacency(tris, tri_region, verts_xy, labels)
+    _portal_end_nodes(tris, nbr, labels, nodes, ring_nb)
+    return TriMesh(verts_xy, verts_fl, tris, nbr, tri_region, region_island, span_region, *_node_arrays(nodes))
 
 
 def _adjacency(tris, tri_region, verts_xy, labels) -> np.ndarray:
