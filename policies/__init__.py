@@ -13,8 +13,7 @@ from policies.base import NavPolicy, WaypointNormal
 POLICY_NAMES = ("cnn", "citywalker", "nomad", "mbra")
 
 
-def make_policy(name: str, **kwargs) -> NavPolicy:
-    """Build a policy by name. Unknown names or config fields raise with the valid choices listed."""
+def _classes(name: str):
     if name == "cnn":
         from policies.cnn import CNNConfig as Cfg, CNNPolicy as Pol
     elif name == "citywalker":
@@ -25,6 +24,13 @@ def make_policy(name: str, **kwargs) -> NavPolicy:
         from policies.mbra import MBRAConfig as Cfg, MBRAPolicy as Pol
     else:
         raise ValueError(f"unknown policy {name!r}; expected one of {POLICY_NAMES}")
+    return Cfg, Pol
+
+
+def policy_config(name: str, **kwargs):
+    """The validated config of policy `name` (no model built: cheap, so a typo fails before any work).
+    Unknown names or config fields raise with the valid choices listed."""
+    Cfg, _ = _classes(name)
     fields = {f.name for f in dataclasses.fields(Cfg)}
     bad = sorted(set(kwargs) - fields)
     if bad:
@@ -32,7 +38,12 @@ def make_policy(name: str, **kwargs) -> NavPolicy:
     for k in ("image_size", "action_min", "action_max"):
         if k in kwargs and kwargs[k] is not None:
             kwargs[k] = tuple(kwargs[k])
-    return Pol(Cfg(**kwargs))
+    return Cfg(**kwargs)
 
 
-__all__ = ["NavPolicy", "WaypointNormal", "make_policy", "POLICY_NAMES"]
+def make_policy(name: str, **kwargs) -> NavPolicy:
+    """Build a policy by name. Unknown names or config fields raise with the valid choices listed."""
+    return _classes(name)[1](policy_config(name, **kwargs))
+
+
+__all__ = ["NavPolicy", "WaypointNormal", "make_policy", "policy_config", "POLICY_NAMES"]

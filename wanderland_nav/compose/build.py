@@ -85,12 +85,21 @@ def make_logger(logger_cfg, run_dir: Path, scene=None):
     raise ValueError(f"logger.kind={logger_cfg.kind!r}: expected console or rerun")
 
 
-def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
-    from policies import make_policy
+def check_policy_config(policy_cfg: dict):
+    """The `policy` group validated without building the model (a typo fails before the scene is prepared)."""
+    from policies import policy_config
 
     kw = dict(policy_cfg)
     if "name" not in kw:
         raise ValueError("policy: no `name` (conf/policy/<name>.yaml)")
+    return policy_config(kw.pop("name"), **kw)
+
+
+def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
+    from policies import make_policy
+
+    check_policy_config(policy_cfg)
+    kw = dict(policy_cfg)
     return make_policy(kw.pop("name"), **kw).to(device)
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import torch
 
-from wanderland_nav.compose.build import (env_factory, load_navmesh, make_logger, make_policy_from_config,
-                                          scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
+                                          make_policy_from_config, scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.episode_file import episodes_for_run
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
@@ -100,6 +100,7 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     torch.manual_seed(c.seed)
     if c.threads:
         torch.set_num_threads(c.threads)
+    check_policy_config(c.policy)  # a policy.* typo fails here, before any scene work
     scene, episodes_path, scene_part, envs = _scene_set(c) if c.scene.set else _single_scene(c)
     identity = run_identity(config, scene_part)
     run_dir = checked_run_dir(c, identity)

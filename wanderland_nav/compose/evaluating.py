@@ -1,0 +1,58 @@
+"""`evaluate`'s composition: the reference policies and a scene set evaluated scene by scene."""
+
+from __future__ import annotations
+
+from functools import partial
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.compose.build import blind_env_config
+from wanderland_nav.compose.cli import hydra_output_dir
+from wanderland_nav.compose.comparison import compare_checkpoints
+from wanderland_nav.compose.identity import run_identity
+from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
+from wanderland_nav.compose.schema import EvaluateConfig
+from wanderland_nav.envs.evaluation import write_results
+from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
+from wanderland_nav.rl.scene_sets import SceneSetEvaluation
+
+
+def reference_policy(c: EvaluateConfig, env):
+    """The built-in references: the privileged navmesh expert (upper bound) or uniform random actions."""
+    if c.reference == "expert":
+        return ExpertPolicy(env, source=c.expert_path_source)
+    if c.reference == "random":
+        return RandomPolicy(env.action_spec, seed=c.seed)
+    raise ValueError(f"reference={c.reference!r}: expected expert or random (trained policies: checkpoints=[...])")
+
+
+def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
+    """`scene=demo_set` (any `scene.set`): every scene's split, one table with rows overall, indoor/outdoor
+    and `scene/<id>`; references, or `checkpoints=[...]` side by side."""
+    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.demo_episodes, seed=c.seed,
+                            goal_images=c.render_for_reference)
+    identity = run_identity(OmegaConf.to_container(cfg, resolve=True), scene_set_identity(paths))
+    out = Path(c.out) if c.out is not None else hydra_output_dir()
+    split = c.split if c.split is not None else c.env.split
+    if c.checkpoints:
+        rows, results, table = compare_checkpoints(c.checkpoints, None, None, None, split=split,
+                                                   num_episodes=c.num_episodes, batch_size=c.batch_size,
+                                                   device=c.device, seed=c.seed, progress=c.progress, scene_set=paths)
+        print(f"set {c.scene.name} ({len(paths)} scenes): split {split}\n{table}", flush=True)
+        atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
+                                                          "summary": {k: r.summary for k, r in results.items()}})
+        return rows
+    env_cfg = c.env if c.render_for_reference else blind_env_config(c.env)
+    policy = partial(reference_policy, c)
+    policy.per_env = True  # the references read their env (expert paths, action spec)
+    envs = scene_env_fn(paths, env_cfg, split=split, device=c.device)
+    res = SceneSetEvaluation(list(paths), envs, c.batch_size).run(policy, c.num_episodes, seed=c.seed,
+                                                                  name=c.reference, progress=c.progress)
+    print(f"set {c.scene.name}: {len(paths)} scenes, {len(res.records)} episodes (split {split}), "
+          f"reference {c.reference}\n{res.table}", flush=True)
+    write_results(out, c.reference, res, meta={"scenes": paths, "split": split, "reference": c.reference,
+                                               "env": OmegaConf.to_container(cfg.env), "seed": c.seed,
+                                               "identity": identity})
+    return res
