@@ -7,25 +7,13 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import time
 from pathlib import Path
 
-from wanderland_nav.atomic import atomic_write_json, atomic_write_text
+from wanderland_nav.atomic import atomic_write_json, atomic_write_text, finite_or_none
 from wanderland_nav.gsfit.trainer import FitConfig
 
 log = logging.getLogger("wanderland_nav.fit")
-
-
-def json_safe(obj):
-    """Non-finite floats -> None (JSON has no NaN/inf; a view with no valid pixels gives NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    return obj
 
 
 def fit_scene(scene, out_dir: Path, fit_cfg: FitConfig, *, record: dict, resume: bool = True, evaluate: bool = True,
@@ -40,7 +28,7 @@ def fit_scene(scene, out_dir: Path, fit_cfg: FitConfig, *, record: dict, resume:
 
     def log_fn(step, scalars, _images):
         if log_every and step % log_every == 0:
-            rows.append(json.dumps(json_safe({"step": step, **scalars})))
+            rows.append(json.dumps(finite_or_none({"step": step, **scalars})))
             if scalar_logger is not None:
                 scalar_logger.log_scalars({f"fit/{k}": v for k, v in scalars.items()}, step)
 
@@ -68,7 +56,7 @@ def fit_scene(scene, out_dir: Path, fit_cfg: FitConfig, *, record: dict, resume:
         print(table)
     timing["total_s"], timing["total_cpu_s"] = time.perf_counter() - t_start, time.process_time() - c_start
     results["timing"] = timing
-    atomic_write_json(out_dir / "results.json", json_safe(results))
+    atomic_write_json(out_dir / "results.json", finite_or_none(results))
     log.info("wrote %s (%d Gaussians) after %d steps; timing %s", out_dir / "3dgs.ply",
              results["train"]["num_gaussians"], results["train"]["step"], {k: round(v, 1) for k, v in timing.items()})
     return results
