@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import torch
 import pytest
 import trimesh
 
@@ -63,9 +64,13 @@ def test_navmesh_gaussians_cameras_and_episode_starts(exported):
     nav = stage.GetPrimAtPath("/World/Scene/NavMesh")
     assert len(UsdGeom.Mesh(nav).GetFaceVertexCountsAttr().Get()) == len(nm.tris)
     idx = np.asarray(UsdGeom.Mesh(nav).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
-    centroids = _points(nav)[idx].mean(1)  # scene frame: each triangle's centre lies on the navmesh
-    # (within two cell heights: a corner's floor can differ from the floor under the centre by 0.4 m)
-    assert nm.is_navigable(centroids, max_height_delta=0.5).all()
+    # scene frame: the navmesh's own triangles, corner for corner (USD stores float32 points). Not their centres'
+    # heights: on terrain a big navmesh triangle's plane through its corner floors can leave the cell floor under
+    # its centre by more than 0.6 m (the tiny demo: 0.67 m on a ramp), a property of the bake, not of the export
+    np.testing.assert_array_equal(idx, nm.tris)
+    local = torch.from_numpy(np.column_stack([nm.verts_xy, nm.verts_z]).astype(np.float64))
+    np.testing.assert_allclose(_points(nav), nm.to_scene(local).numpy(), atol=1e-4)
+    assert nm.is_navigable(_points(nav)[idx].mean(1), max_height_delta=4 * nm.ch).all()  # over its triangles
     g = stage.GetPrimAtPath("/World/Scene/Gaussians")
     api = UsdGeom.PrimvarsAPI(g)
     assert len(_points(g)) == summary["gaussians"] == 2000

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import logging
 import time
 from pathlib import Path
@@ -21,6 +22,7 @@ import trimesh
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.cache import json_digest, read_record
 from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.geometry import parse_up_axis
 from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
 from wanderland_nav.scene.collision import (CollisionSettings, crop_mesh_to_trajectory, extract_collision_mesh,
                                             load_collision_mesh)
@@ -31,7 +33,7 @@ log = logging.getLogger(__name__)
 
 COLLISION_MESH = "collision_mesh.ply"
 NAVMESH = "navmesh.npz"
-_FORMAT = 1  # bump when the meaning of an artefact changes, so stale caches rebuild
+_FORMAT = 2  # bump when the meaning of an artefact changes, so stale caches rebuild (2: ground sheet, lidar filter)
 
 
 def _sidecar(path: Path) -> Path:
@@ -116,7 +118,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
             "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
-            "ground_fill": meta.get("ground_fill"), "skipped": False}
+            "ground_fill": meta.get("ground_fill"), "lidar_filter": scene.meta.get("lidar_filter"), "skipped": False}
     atomic_write_json(_sidecar(out), side)
     return out, side
 
@@ -164,6 +166,27 @@ def _island_summary(nm) -> list[dict]:
     return out
 
 
+def check_navmesh_frame(scene: Scene) -> None:
+    """Refuse a `navmesh.npz` beside the scene that was baked for another up axis than the scene's (a copied
+    navmesh, an up axis changed in scene_meta.json after prepare): its floors would be walls. Checked where a
+    scene is prepared or its artefacts are taken as they are, so the error names the file and both axes here,
+    not deep inside the episode sampler. Unreadable files are left to `NavMesh.load` to report."""
+    path = scene.root / NAVMESH
+    if not path.is_file():
+        return
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            baked = json.loads(str(z["meta"]))["settings"]["up_axis"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if parse_up_axis(baked) != parse_up_axis(scene.up_axis):
+        raise WanderlandInputError(
+            f"navmesh baked for up axis {baked}, but the scene's up axis is {scene.up_axis} (from "
+            f"{scene.up_axis_source}); re-run prepare for this scene (python -m wanderland_nav.prepare "
+            f"scene={scene.root} navigation.prepare=true), or set scene.up_axis={baked} if the navmesh is right",
+            path=path, field="settings.up_axis")
+
+
 def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = CollisionSettings(),
                   navmesh=None, up_axis: str | None = None, bake_navmesh: bool = True) -> Scene:
     """Collision mesh then navmesh beside the scene (skipping what is up to date); returns the
@@ -177,6 +200,7 @@ def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = C
         nm_path, nm_side = build_navmesh(scene, navmesh, force=force)
         scene.navmesh_path = nm_path
         report["navmesh"] = nm_side
+    check_navmesh_frame(scene)
     scene.meta = {**scene.meta, "prepare": report}
     return scene
 

@@ -173,11 +173,18 @@ def test_v2_loads_with_lidar_and_poses(tmp_path, shared_data):
     assert s.version == "v2" and s.up_axis == "+z" and s.mesh_path == root / "scene.ply"
     from wanderland_nav.scene.pointcloud import read_kitti_bin
     a, b = read_kitti_bin(root / "lidar/000000.bin"), read_kitti_bin(root / "lidar/000001.bin")
-    assert len(s.points) == len(a) + len(b)
+    # vehicle sweeps (.bin in their sensor frames): the car's own returns within 2.7 m are dropped by default
+    far_a, far_b = (np.linalg.norm(x[:, :2], axis=1) >= 2.7 for x in (a, b))
+    assert len(s.points) == far_a.sum() + far_b.sum()
+    assert s.meta["lidar_filter"] == {"min_range_m": 2.7, "points_dropped": int((~far_a).sum() + (~far_b).sum()),
+                                      "source": "default for vehicle sweeps (.bin scans in their sensor frames)"}
     T1 = np.eye(4)
     T1[:3] = poses[1].reshape(3, 4)
-    np.testing.assert_allclose(s.points[len(a):], b[:, :3] @ T1[:3, :3].T + T1[:3, 3], atol=1e-4)
+    np.testing.assert_allclose(s.points[far_a.sum():], b[far_b, :3] @ T1[:3, :3].T + T1[:3, 3], atol=1e-4)
     assert (s.colors == 128).all() and s.cameras == []
+    (root / "scene_meta.json").write_text(json.dumps({"lidar_min_range": 0}))  # the scene's own setting wins
+    kept = load_scene(root)
+    assert len(kept.points) == len(a) + len(b) and kept.meta["lidar_filter"]["source"] == "scene_meta.json lidar_min_range"
 
 
 def test_v2_mesh_vertices_fallback(tmp_path):

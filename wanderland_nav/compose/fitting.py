@@ -12,6 +12,7 @@ from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.scene import scene_folder
 from wanderland_nav.compose.schema import FitRunConfig
+from wanderland_nav.errors import WanderlandInputError
 
 log = logging.getLogger("wanderland_nav.fit")
 
@@ -36,6 +37,12 @@ def fit_parts(c: FitRunConfig, config: dict):
     if c.threads:
         torch.set_num_threads(c.threads)
     scene = load_scene(scene_folder(c.scene), up_axis=c.scene.up_axis)
+    if not scene.cameras:  # a LiDAR-only scene (lidar/ + poses.txt): nothing to fit the colours to
+        raise WanderlandInputError(
+            "fit needs posed camera images (images/ + a COLMAP model, or fisheye/ + transforms.json) and this "
+            f"scene has none ({len(scene.points):,} LiDAR points only): Gaussians are fitted to photographs. "
+            "A LiDAR-only scene works with prepare, make_episodes, evaluate reference=expert, replay and export_usd",
+            path=scene.root, field="cameras")
     inputs = {p.relative_to(scene.root).as_posix(): p for p in scene_inputs(scene.root)}
     identity = run_identity(config, scene_identity(scene.root, files=inputs))
     out_dir = fit_run_dir(c, scene.name, identity)

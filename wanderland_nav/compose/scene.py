@@ -9,7 +9,7 @@ from pathlib import Path
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
 from wanderland_nav.scene import load_scene, make_demo_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,9 @@ def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, demo_prese
     path = scene_folder(scene, demo_preset)
     prepare = navigation.prepare if prepare is None else prepare
     if not (prepare or scene.demo or force):
-        return load_scene(path, up_axis=scene.up_axis)
+        loaded = load_scene(path, up_axis=scene.up_axis)
+        check_navmesh_frame(loaded)
+        return loaded
     return prepare_scene(path, force=force, collision=navigation.collision, navmesh=navigation.navmesh,
                          up_axis=scene.up_axis, bake_navmesh=bake_navmesh)
 

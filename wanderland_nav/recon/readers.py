@@ -94,7 +94,8 @@ def read_scene(path) -> PoseSet:
     except SceneFormatError as e:
         raise ReconInputError(str(e)) from None
     if not scene.cameras:
-        raise ReconInputError(f"{path}: scene has no cameras (no sparse model or transforms.json frames)")
+        raise ReconInputError(f"{path}: scene has no cameras (no sparse model or transforms.json frames); recon_eval "
+                              "scores camera poses and novel views, a LiDAR-only scene (lidar/ + poses.txt) has neither")
     return PoseSet(scene.world_from_cams(), str(path), "scene", names=tuple(_norm_name(c.name) for c in scene.cameras),
                    up_axis=scene.up_axis)
 

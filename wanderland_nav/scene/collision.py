@@ -1,6 +1,6 @@
 """Collision mesh from a metric point cloud: the Wanderland paper's recipe.
 
-crop to the capture corridor -> voxel occupancy -> ground infill -> marching cubes -> drop small components.
+crop to the capture corridor -> voxel occupancy -> ground sheet -> marching cubes -> drop small components.
 
 Why each step:
 * **crop** — LiDAR sees far beyond where an agent can go (building facades 80 m away, sky returns,
@@ -10,9 +10,11 @@ Why each step:
 * **voxel occupancy** — turns an unstructured, noisy cloud into a watertight-able field; voxels
   with fewer than `min_points_per_voxel` hits are noise; an optional morphological closing
   (`close_iterations`) bridges the gaps between LiDAR rings.
-* **ground infill** (`scene.ground`) — a LiDAR sees no ground under itself and a sparse one sees the
+* **ground sheet** (`scene.ground`) — a LiDAR sees no ground under itself and a sparse one sees the
   road only as rings; ground columns bounded by observed ground on all sides are filled from a height
-  field fitted between the ground returns, never across an observed obstacle (`ground_fill`).
+  field fitted between the ground returns, never across an observed obstacle, and the ground (observed
+  and filled) becomes a sheet of triangles at its measured height instead of voxel slabs whose tops sit
+  up to a voxel above the road (`ground_fill`).
 * **marching cubes** (scikit-image) on the occupancy at level 0.5 ("ascent": outward winding, positive
   volume): each occupied layer becomes a
   thin closed slab whose faces sit half a voxel from the scanned surface, normals pointing out.
@@ -47,7 +49,7 @@ from skimage.measure import marching_cubes
 
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
-from wanderland_nav.scene.ground import fill_ground
+from wanderland_nav.scene.ground import GroundSurface, fit_ground, sheet_mesh
 
 log = logging.getLogger(__name__)
 
@@ -143,8 +145,10 @@ def _marching_cubes_slabs(grid: np.ndarray, slab: int) -> tuple[np.ndarray, np.n
     return uniq, faces[good]
 
 
-def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """Remove connected components (sharing vertices) with fewer than `min_faces` faces; reindex."""
+def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int,
+                          protected: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Remove connected components (sharing vertices) with fewer than `min_faces` faces, unless one of
+    their faces is `protected` (`bool [F]`: known obstacles, e.g. a sparse LiDAR's few returns on a car); reindex."""
     if faces.shape[0] == 0:
         return verts, faces
     if min_faces > 1:
@@ -152,10 +156,12 @@ def drop_small_components(verts: np.ndarray, faces: np.ndarray, min_faces: int) 
         rows = np.concatenate([faces[:, 0], faces[:, 1]])
         cols = np.concatenate([faces[:, 1], faces[:, 2]])
         g = sp.coo_matrix((np.ones(rows.shape[0], np.int8), (rows, cols)), shape=(nv, nv))
-        _, label = connected_components(g, directed=False)
+        n, label = connected_components(g, directed=False)
         face_label = label[faces[:, 0]]
-        size = np.bincount(face_label)
-        faces = faces[size[face_label] >= min_faces]
+        keep = np.bincount(face_label, minlength=n) >= min_faces
+        if protected is not None:
+            keep[face_label[protected]] = True
+        faces = faces[keep[face_label]]
     used = np.zeros(verts.shape[0], dtype=bool)
     used[faces.reshape(-1)] = True
     remap = np.cumsum(used) - 1
@@ -236,34 +242,39 @@ def _nav_bounds(pts: np.ndarray, R: np.ndarray, chunk: int) -> tuple[np.ndarray,
 
 
 def _occupied_voxels(pts: np.ndarray, R: np.ndarray, lo: np.ndarray, hi: np.ndarray, vox: float, chunk: int,
-                     min_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pass B of voxelisation: `(ijk [K,3] int64, counts [K] int64)` of the voxels (global nav-frame key
-    space from `lo`) holding at least `min_points` finite points. Keys are linear indices into a grid that
-    is never allocated densely; per-chunk uniques are merged, so memory scales with occupied voxels."""
+                     min_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pass B of voxelisation: `(ijk [K,3] int64, counts [K] int64, zmean [K] float64)` of the voxels (global
+    nav-frame key space from `lo`) holding at least `min_points` finite points; `zmean` is the mean nav z (m)
+    of their points (the ground sheet's measured height). Keys are linear indices into a grid that is never
+    allocated densely; per-chunk uniques are merged, so memory scales with occupied voxels."""
     gdims = np.floor((hi - lo) / vox).astype(np.int64) + 1  # global key space (never allocated densely)
     if float(np.prod(gdims.astype(np.float64))) > 2.0**62:
         raise ValueError(f"point cloud extent {(hi - lo).tolist()} m is too large for voxel_size {vox}")
-    keys_l, counts_l = [], []
+    keys_l, counts_l, zsum_l = [], [], []
     for s in range(0, pts.shape[0], chunk):
         c = pts[s:s + chunk].astype(np.float32) @ R.T
         c = c[np.isfinite(c).all(-1)]
         ijk = np.clip(np.floor((c - lo) / vox).astype(np.int64), 0, gdims - 1)
-        u, cnt = np.unique((ijk[:, 0] * gdims[1] + ijk[:, 1]) * gdims[2] + ijk[:, 2], return_counts=True)
+        u, inv, cnt = np.unique((ijk[:, 0] * gdims[1] + ijk[:, 1]) * gdims[2] + ijk[:, 2], return_inverse=True,
+                                return_counts=True)
         keys_l.append(u)
         counts_l.append(cnt)
+        zsum_l.append(np.bincount(inv.reshape(-1), weights=c[:, 2], minlength=len(u)))
     keys, inv = np.unique(np.concatenate(keys_l), return_inverse=True)
     counts = np.bincount(inv.reshape(-1), weights=np.concatenate(counts_l)).astype(np.int64)
+    zmean = np.bincount(inv.reshape(-1), weights=np.concatenate(zsum_l)) / counts
     dense_enough = counts >= min_points
-    keys, counts = keys[dense_enough], counts[dense_enough]
+    keys, counts, zmean = keys[dense_enough], counts[dense_enough], zmean[dense_enough]
     ijk = np.stack([keys // (gdims[1] * gdims[2]), (keys // gdims[2]) % gdims[1], keys % gdims[2]], -1)
-    return ijk, counts
+    return ijk, counts, zmean
 
 
-def _occupancy_grid(ijk: np.ndarray, lo: np.ndarray, vox: float, cfg: CollisionSettings, meta: dict
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _occupancy_grid(ijk: np.ndarray, zmean: np.ndarray, lo: np.ndarray, vox: float, cfg: CollisionSettings,
+                    meta: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, GroundSurface | None]:
     """Dense bool occupancy over the cropped voxels' box (not over the whole cloud), padded so surfaces
-    close at the border, with ground infill and binary closing applied. Returns `(grid [X,Y,Z] bool,
-    dims [3], origin [3])`, origin = nav-frame corner of local voxel (0,0,0). Adds ground-fill stats to `meta`."""
+    close at the border, binary closing applied, and (with `ground_fill`) the ground layer of the ground
+    sheet's columns removed. Returns `(grid [X,Y,Z] bool, dims [3], origin [3], ground sheet or None)`,
+    origin = nav-frame corner of local voxel (0,0,0). Adds ground figures to `meta`."""
     pad = 1 + cfg.close_iterations
     imin = ijk.min(0)
     dims = ijk.max(0) - imin + 1 + 2 * pad
@@ -274,29 +285,37 @@ def _occupancy_grid(ijk: np.ndarray, lo: np.ndarray, vox: float, cfg: CollisionS
     grid = np.zeros(tuple(dims), dtype=bool)
     loc = ijk - imin + pad
     grid[loc[:, 0], loc[:, 1], loc[:, 2]] = True
+    surface = None
     if cfg.ground_fill:
-        fill = fill_ground(loc, dims, vox, max_gap=cfg.ground_max_gap, window=cfg.ground_window,
-                           max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance,
-                           bridge_size=cfg.ground_bridge)
-        grid[fill.voxels[:, 0], fill.voxels[:, 1], fill.voxels[:, 2]] = True
-        meta["ground_fill"] = {"filled_area_m2": fill.filled_area_m2, "ground_columns": fill.ground_columns,
-                               "obstacle_columns": fill.obstacle_columns}
-        log.info("ground infill: %.1f m2 added between %d ground columns (%d obstacle columns)",
-                 fill.filled_area_m2, fill.ground_columns, fill.obstacle_columns)
+        surface = fit_ground(loc, zmean, dims, vox, origin[2], max_gap=cfg.ground_max_gap, window=cfg.ground_window,
+                             max_rise=cfg.ground_max_rise, clearance=cfg.ground_clearance,
+                             bridge_size=cfg.ground_bridge)
+        meta["ground_fill"] = {"filled_area_m2": surface.filled_area_m2, "ground_columns": surface.ground_columns,
+                               "obstacle_columns": surface.obstacle_columns,
+                               "sheet_area_m2": float(len(surface.columns) * vox * vox)}
+        log.info("ground sheet: %.1f m2 (%.1f m2 filled between %d ground columns; %d obstacle columns)",
+                 meta["ground_fill"]["sheet_area_m2"], surface.filled_area_m2, surface.ground_columns,
+                 surface.obstacle_columns)
     if cfg.close_iterations > 0:
         grid = ndi.binary_closing(grid, iterations=cfg.close_iterations)
-    return grid, dims, origin
+    if surface is not None:  # the sheet replaces the ground layer (voxel slab, low clutter) of its columns
+        layer_top = np.full(tuple(dims[:2]), -1, np.int64)
+        layer_top[surface.columns[:, 0], surface.columns[:, 1]] = surface.layer_top
+        grid &= np.arange(dims[2])[None, None, :] > layer_top[:, :, None]
+    return grid, dims, origin, surface
 
 
 def _filter_faces(verts_nav: np.ndarray, faces: np.ndarray, cams_nav: np.ndarray, cfg: CollisionSettings,
-                  meta: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Drop hidden ceiling/roof tops (only when capture positions exist), then small components; nav frame.
+                  meta: dict, obstacle_of=None) -> tuple[np.ndarray, np.ndarray]:
+    """Drop hidden ceiling/roof tops (only when capture positions exist), then small components, except those
+    `obstacle_of(face centres [F,3]) -> bool [F]` calls obstacles; nav frame.
     Returns the reindexed `(verts [V,3], faces [F,3])`; records the hidden-top count in `meta`."""
     if cfg.drop_tops_above_capture is not None and cams_nav.shape[0]:
         keep_f = ~unseen_top_faces(verts_nav, faces, cams_nav, cfg.drop_tops_above_capture)
         meta["hidden_top_faces_dropped"] = int((~keep_f).sum())
         faces = faces[keep_f]
-    return drop_small_components(verts_nav, faces, cfg.min_component_faces)
+    protected = None if obstacle_of is None else obstacle_of(verts_nav[faces].mean(1))
+    return drop_small_components(verts_nav, faces, cfg.min_component_faces, protected)
 
 
 def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: float = 0.15,
@@ -319,14 +338,14 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
     # 1. voxelise every finite point in the nav frame (two chunked passes: bounds, then occupied keys)
     vox = float(cfg.voxel_size)
     lo, hi = _nav_bounds(pts, R, cfg.chunk_points)
-    ijk, counts = _occupied_voxels(pts, R, lo, hi, vox, cfg.chunk_points, cfg.min_points_per_voxel)
+    ijk, counts, zmean = _occupied_voxels(pts, R, lo, hi, vox, cfg.chunk_points, cfg.min_points_per_voxel)
     timings["voxelize_s"] = time.perf_counter() - t0
 
     # 2. crop at voxel resolution: one KD query per occupied voxel instead of per point
     t1 = time.perf_counter()
     centres = (lo + (ijk + 0.5) * vox).astype(np.float32)
     keep = crop_to_trajectory(centres, cams @ Rn.T, cfg.crop_radius, cfg.height_band, cfg.chunk_points)
-    ijk = ijk[keep]
+    ijk, zmean = ijk[keep], zmean[keep]
     meta = {"settings": cfg.as_dict(), "up_axis": up, "points_in": int(pts.shape[0]),
             "points_kept": int(counts[keep].sum())}
     timings["crop_s"] = time.perf_counter() - t1
@@ -337,7 +356,7 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
 
     # dense occupancy over the cropped voxels' box, padded so surfaces close at the border
     t2 = time.perf_counter()
-    grid, dims, origin = _occupancy_grid(ijk, lo, vox, cfg, meta)
+    grid, dims, origin, surface = _occupancy_grid(ijk, zmean, lo, vox, cfg, meta)
     timings["grid_s"] = time.perf_counter() - t2
 
     # 3. marching cubes, slab by slab
@@ -350,11 +369,19 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
 
     # voxel (i,j,k) centre sits at origin + (ijk + 0.5) * vox; marching cubes works on centres
     verts_nav = origin + (verts_idx + 0.5) * vox
+    obstacle_of = None
+    if surface is not None:
+        sheet_v, sheet_f = sheet_mesh(surface, origin[:2], vox)
+        verts_nav, faces = np.concatenate([verts_nav, sheet_v]), np.concatenate([faces, sheet_f + len(verts_nav)])
+
+        def obstacle_of(c):  # faces of voxels in the ground step's obstacle columns (centre inside the column)
+            ij = np.clip(np.floor((c[:, :2] - origin[:2]) / vox).astype(np.int64), 0, dims[:2] - 1)
+            return surface.obstacle[ij[:, 0], ij[:, 1]]
     n_before = int(faces.shape[0])
 
     # 4. hidden tops, then small components
     t4 = time.perf_counter()
-    verts_nav, faces = _filter_faces(verts_nav, faces, cams @ Rn.T, cfg, meta)
+    verts_nav, faces = _filter_faces(verts_nav, faces, cams @ Rn.T, cfg, meta, obstacle_of)
     timings["components_s"] = time.perf_counter() - t4
     meta["faces_before_filter"] = n_before
     verts_scene = verts_nav @ Rn  # row form of R^T p (R orthonormal)

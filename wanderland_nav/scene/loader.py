@@ -53,11 +53,11 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
 
     tj = read_transforms_json(root / "transforms.json") if (root / "transforms.json").is_file() else None
     cameras = _load_cameras(root, tj)
-    lidar_poses = None
+    lidar_poses, lidar_filter = None, None
     if version == "v1":
         points, colors = _load_v1_points(root)
     else:
-        points, colors, lidar_poses = _load_v2_points(root, meta)
+        points, colors, lidar_poses, lidar_filter = _load_v2_points(root, meta)
 
     def opt(name: str) -> Path | None:
         p = root / name
@@ -70,7 +70,8 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
         episodes_path=opt("episodes.json"), gt_mesh_path=opt("gt_mesh.ply"),
         environment=meta.environment if meta else None, indoor_regions=meta.indoor_regions if meta else [],
         up_axis_source=source, mesh_path=opt("scene.ply") if version == "v2" else None,
-        meta=meta.raw if meta else {}, lidar_poses=lidar_poses,
+        meta={**(meta.raw if meta else {}), **({"lidar_filter": lidar_filter} if lidar_filter else {})},
+        lidar_poses=lidar_poses,
     )
 
 
@@ -427,29 +428,39 @@ def _scan_poses(root: Path, files: list[Path], meta) -> np.ndarray | None:
     return None
 
 
-def _lidar_min_range(meta, poses) -> float:
-    """`scene_meta.json` `lidar_min_range` (m, default 0): returns closer than this to the sensor (horizontal,
-    in each scan's own frame) are the capture platform (a car's roof, hood and mirrors seen by its roof
-    LiDAR: KITTI ~2.6 m) and are dropped; they would be obstacles inside the blind spot under the path."""
+#: default self-return radius (m) for vehicle sweeps: KITTI's roof Velodyne sees its own car (roof, hood,
+#: mirrors) up to 2.6 m away; a passenger car reaches ~2.5 m from its roof centre or rear axle
+VEHICLE_SWEEP_MIN_RANGE = 2.7
+
+
+def _lidar_min_range(meta, poses, files: list[Path]) -> tuple[float, str]:
+    """`(radius m, where it came from)`: returns closer than this to the sensor (horizontal, in each scan's own
+    frame) are the capture platform (a car's roof, hood and mirrors seen by its roof LiDAR: KITTI ~2.6 m) and
+    are dropped; they would be obstacles inside the blind spot under the path. `scene_meta.json`
+    `lidar_min_range` wins; else vehicle sweeps (KITTI `.bin` records in their sensor frames, i.e. with
+    `lidar/poses.txt` or a single scan) get `VEHICLE_SWEEP_MIN_RANGE`, everything else (registered clouds,
+    hand-held `.ply`/`.las` scans whose platform is a person) 0."""
     if meta is None or "lidar_min_range" not in meta.raw:
-        return 0.0
+        if poses is not None and all(f.suffix.lower() == ".bin" for f in files):
+            return VEHICLE_SWEEP_MIN_RANGE, "default for vehicle sweeps (.bin scans in their sensor frames)"
+        return 0.0, "default (not vehicle sweeps)"
     r = meta.raw["lidar_min_range"]
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not np.isfinite(r) or r < 0:
         raise SceneFormatError(f"{meta.path}: field lidar_min_range must be a number >= 0 (metres), got {r!r}")
     if r > 0 and poses is None:
         raise SceneFormatError(f"{meta.path}: field lidar_min_range needs scans in their sensor frames "
                                "(lidar/poses.txt or one .bin scan); these files are a registered cloud")
-    return float(r)
+    return float(r), f"{meta.path.name} lidar_min_range"
 
 
-def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, dict | None]:
     """`lidar/` frames (sorted by name), moved by `lidar/poses.txt` when present; else the mesh vertices.
-    Returns (points, colours, world_from_sensor poses or None)."""
+    Returns (points, colours, world_from_sensor poses or None, the self-return filter applied or None)."""
     files = _lidar_files(root)
     if files:
         poses = _scan_poses(root, files, meta)
-        min_range = _lidar_min_range(meta, poses)
-        xyzs, rgbs = [], []
+        min_range, source = _lidar_min_range(meta, poses, files)
+        xyzs, rgbs, dropped = [], [], 0
         for i, f in enumerate(files):  # one iteration per LiDAR frame (tens), points are batched
             try:
                 pc = read_points_any(f)
@@ -461,12 +472,17 @@ def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarra
             xyz, rgb = pc.xyz, pc.rgb
             if min_range > 0:  # sensor frame: returns from the capture platform itself
                 far = np.linalg.norm(xyz[:, :2], axis=1) >= min_range
+                dropped += int((~far).sum())
                 xyz, rgb = xyz[far], rgb[far] if rgb is not None else None
             if poses is not None and not np.array_equal(poses[i], np.eye(4)):
                 xyz = (xyz.astype(np.float64) @ poses[i, :3, :3].T + poses[i, :3, 3]).astype(np.float32)
             xyzs.append(xyz)
             rgbs.append(rgb if rgb is not None else np.full((len(xyz), 3), 128, np.uint8))
-        return np.concatenate(xyzs), np.concatenate(rgbs), poses
+        if min_range > 0:
+            log.info("%s: dropped %d LiDAR returns within %.2f m of the sensor (the capture platform; %s)",
+                     root, dropped, min_range, source)
+        filt = {"min_range_m": min_range, "source": source, "points_dropped": dropped}
+        return np.concatenate(xyzs), np.concatenate(rgbs), poses, filt
     mesh = root / "scene.ply"
     if mesh.is_file():
         log.warning("%s: no lidar/ frames: using scene.ply vertices as the point cloud", root)
@@ -475,5 +491,5 @@ def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarra
         except PointCloudFormatError as e:
             raise SceneFormatError(str(e)) from None
         _check_finite(mesh, pc.xyz)
-        return pc.xyz, pc.rgb if pc.rgb is not None else np.full((len(pc), 3), 128, np.uint8), None
+        return pc.xyz, pc.rgb if pc.rgb is not None else np.full((len(pc), 3), 128, np.uint8), None, None
     raise SceneFormatError(f"{root}: v2 scene has neither lidar/*{{{','.join(LIDAR_SUFFIXES)}}} nor scene.ply")
