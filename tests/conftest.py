@@ -86,3 +86,25 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(n)
+
+
+@pytest.fixture
+def entry_point():
+    """`entry_point(name, *overrides)` runs `python -m wanderland_nav.<name> <overrides>` in-process: the same
+    Hydra composition and `scene=<folder>` shorthand as the command line, then the module's `run`."""
+    import importlib
+
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from wanderland_nav.compose.cli import scene_overrides
+
+    def run(name: str, *overrides: str):
+        with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+            cfg = compose(name, overrides=scene_overrides(list(overrides)))
+        module = importlib.import_module(f"wanderland_nav.{name}")
+        if name == "fit":
+            return module.run_fit(cfg)
+        return module.run(OmegaConf.to_container(cfg, resolve=True) if name == "recon_eval" else cfg)
+
+    return run

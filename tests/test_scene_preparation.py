@@ -151,3 +151,22 @@ def test_capture_positions_v2_lidar_poses(tmp_path, shared_data):
     np.testing.assert_allclose(scene_preparation.capture_positions(s), poses.reshape(2, 3, 4)[:, :, 3])
     mesh = trimesh.load(s.collision_mesh_path, process=False)
     assert np.linalg.norm(mesh.vertices[:, :2], axis=1).max() < 10.0 + np.abs(poses[:, [3, 7]]).max() + 0.5
+
+
+def test_a_navmesh_baked_for_another_up_axis_is_refused_where_the_scene_is_prepared(prepared_demo_scene, tmp_path):
+    from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
+    from wanderland_nav.compose.scene import prepared_scene
+    from wanderland_nav.errors import WanderlandInputError
+    from wanderland_nav.scene_preparation import check_navmesh_frame
+
+    root = tmp_path / "demo"
+    shutil.copytree(prepared_demo_scene, root)
+    check_navmesh_frame(load_scene(root))  # the demo's own axis (-y): fine
+    wrong = load_scene(root, up_axis="+z")  # e.g. scene_meta.json's up_axis edited after prepare
+    msg = r"navmesh\.npz: field 'settings\.up_axis': navmesh baked for up axis -y, but the scene's up axis is \+z"
+    with pytest.raises(WanderlandInputError, match=msg):
+        check_navmesh_frame(wrong)
+    with pytest.raises(WanderlandInputError, match=msg):  # the artefacts taken as they are (prepare=false)
+        prepared_scene(SceneGroup(path=str(root), up_axis="+z"), NavigationGroup(prepare=False))
+    with pytest.raises(WanderlandInputError, match=msg):  # prepare without a bake
+        prepare_scene(root, up_axis="+z", bake_navmesh=False, collision=CollisionSettings(voxel_size=0.25))

@@ -6,7 +6,9 @@ Builds `--scene` from `../shared/data/lidar/kitti` (`lidar/00000{0..5}.bin`, `li
 GICP poses, `scene_meta.json` with `lidar_min_range` 2.7 m for the car's own roof returns), then for
 ground infill off and on: prepare (forced), the share of road returns near the sensor path (within
 8 m, within 0.25 m of the road plane 1.73 m under the sensor) that lie on the navmesh, whether the
-road under each sensor pose is navigable, and 50 expert episodes (kept, off-mesh rejections). The
+road under each sensor pose is navigable, the navmesh floor's height above those road returns (KITTI has no
+ground-truth raster: the returns themselves are the reference, |dz| median / p90 over the returns whose x, y
+lie on the navmesh), and 50 expert episodes (kept, off-mesh rejections). The
 figure (navmesh, LiDAR trajectory, expert paths) is written with infill on.
 """
 
@@ -46,6 +48,8 @@ def run(root: Path, ground_fill: bool, png: Path | None) -> dict:
     p = scene.points
     near = np.linalg.norm(p[:, None, :2] - path[None, :, :2], axis=-1).min(1) < 8.0
     road = p[near & (np.abs(p[:, 2] - (path[:, 2].mean() - SENSOR_HEIGHT)) < 0.25)]
+    snapped = nm.snap_point(road, max_distance=1e9)
+    dz = (snapped[:, 2] - road[:, 2])[np.linalg.norm(snapped[:, :2] - road[:, :2], axis=1) <= 0.05]
     eps, summary = generate_episodes(scene, nm, num_episodes=50, seed=0,
                                      settings=GeneratorSettings(goal_images=False))
     if png is not None:
@@ -54,6 +58,8 @@ def run(root: Path, ground_fill: bool, png: Path | None) -> dict:
     fill = scene.meta["prepare"]["collision_mesh"].get("ground_fill") or {}
     return {"ground_fill": ground_fill, "area": nm.area, "filled": fill.get("filled_area_m2", 0.0),
             "road_on_mesh": float(nm.is_navigable(road, max_height_delta=0.4).mean()), "road_points": len(road),
+            "dz_median": float(np.median(np.abs(dz))), "dz_p90": float(np.quantile(np.abs(dz), 0.9)),
+            "dz_signed": float(np.median(dz)),
             "under_path": int(nm.is_navigable(path - [0, 0, SENSOR_HEIGHT], max_height_delta=0.4).sum()),
             "poses": len(path), "kept": len(eps), "candidates": summary.candidates,
             "off_mesh": summary.rejections["off_mesh"]}
@@ -68,7 +74,8 @@ def main(argv=None) -> None:
     for fill in (False, True):
         m = run(a.scene, fill, a.png if fill else None)
         print(f"ground_fill={fill}: navmesh {m['area']:.0f} m2 (infill {m['filled']:.0f} m2); road returns near the "
-              f"path on the navmesh {100 * m['road_on_mesh']:.1f} % of {m['road_points']:,}; road under the sensor "
+              f"path on the navmesh {100 * m['road_on_mesh']:.1f} % of {m['road_points']:,}, floor above them |dz| "
+              f"median {m['dz_median']:.3f} m, p90 {m['dz_p90']:.3f} m (signed median {m['dz_signed']:+.3f}); road under the sensor "
               f"navigable at {m['under_path']}/{m['poses']} poses; expert episodes {m['kept']}/50, off-mesh "
               f"rejections {m['off_mesh']}/{m['candidates']} candidates")
 

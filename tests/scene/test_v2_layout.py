@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -42,16 +43,20 @@ def write_las(path, xyz, rgb16, scale=0.001, offset=(12.0, -7.0, 0.0)):
 
 @pytest.fixture(scope="module")
 def v2_scene(tmp_path_factory):
+    return build_v2_scene(tmp_path_factory.mktemp("v2"))
+
+
+def build_v2_scene(root):
+    """The v2 layout at small size in `root`: `(root, {image name: world_from_cam}, LiDAR xyz, rgb16)`."""
     from PIL import Image
 
-    root = tmp_path_factory.mktemp("v2")
     rng = np.random.default_rng(0)
     frames, poses = [], {}
     for i in range(4):
         name = f"fisheye/cam0/{i:04d}.jpg"
         (root / name).parent.mkdir(parents=True, exist_ok=True)
         Image.fromarray(np.full((H, W, 3), 40 * i, np.uint8)).save(root / name)
-        T = _cam_pose([2.0 * i - 3.0, 0.5, 1.5], yaw=0.3 * i)
+        T = _cam_pose([2.0 * i - 3.0, 0.5 + 0.4 * (i % 2), 1.5], yaw=0.3 * i)  # not collinear: recon_eval aligns them
         poses[name] = T
         frames.append({"file_path": name, "transform_matrix": (T @ np.diag([1, -1, -1, 1])).tolist()})
     tj = {"camera_model": "OPENCV_FISHEYE", "fl_x": FL, "fl_y": FL, "cx": CX, "cy": CY, "w": W, "h": H,
@@ -126,3 +131,28 @@ def test_v2_prepares_from_scene_ply_or_from_the_lidar(v2_scene, tmp_path, use_sc
     assert 60.0 < nm.area < 16 * 12
     near_wall = nm.is_navigable(np.array([[0.0, 4.8, 0.0]]), max_height_delta=0.4)[0]
     assert near_wall == use_scene_mesh
+
+
+@pytest.mark.slow
+def test_v2_fixture_goes_through_every_entry_point(v2_scene, tmp_path, entry_point):
+    """With posed fisheye images a v2 scene takes every entry point: fit writes the `3dgs.ply` that train's
+    camera and export_usd's Gaussians prim need; recon_eval scores its poses against themselves."""
+    root = tmp_path / "v2"
+    shutil.copytree(v2_scene[0], root)
+    scene, out = f"scene={root}", tmp_path / "out"
+    assert entry_point("prepare", scene, "debug=smoke")["navmesh"]["area_m2"] > 60.0
+    entry_point("make_episodes", scene, "debug=smoke")
+    entry_point("fit", scene, "debug=smoke", "export_to_scene=true", f"out_dir={out / 'fit'}")
+    assert (root / "3dgs.ply").is_file()
+    rows = entry_point("train", "+exp=citywalker_rl", scene, "debug=smoke", f"run_dir={out / 'train'}")
+    assert rows and all(r["episodes"] == 2 for r in rows.values())
+    res = entry_point("evaluate", scene, "debug=smoke", "reference=expert", f"out={out}",
+                      f"save_rollouts={out / 'expert.npz'}")
+    assert res.summary["overall"]["SR"] == 1.0, res.table
+    entry_point("replay", f"rollout={out / 'expert.npz'}", "debug=smoke", f"out={out / 'expert.rrd'}")
+    assert (out / "expert.rrd").stat().st_size > 0
+    usd = entry_point("export_usd", scene, "debug=smoke")
+    assert (usd["up_axis"], usd["cameras"], usd["gaussians"]) == ("+z", 4, 2000)
+    bench = entry_point("recon_eval", f"gt={root}", f"pred={root}", f"out={out / 'recon'}", "plot=false",
+                        "rerun=false")["bench"]
+    assert bench.results[0].metrics["t_ate_se3"] < 1e-6 and bench.results[0].metrics["r_ate_deg"] < 1e-4
