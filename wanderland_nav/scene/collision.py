@@ -69,8 +69,9 @@ class CollisionSettings:
     drop_tops_above_capture: float | None = 0.5
     min_points_per_voxel: int = 1
     close_iterations: int = 1  # binary closing (6-connected) to bridge scan-line gaps; 0 = off
-    # Ground infill (`scene.ground.fill_ground`): fill ground columns LiDAR missed (the blind spot under
-    # the sensor, the gaps between sparse rings) where observed ground bounds them on all sides.
+    # Ground step (`scene.ground.fit_ground`): the ground becomes a sheet at its measured height (not voxel
+    # tops), and ground columns LiDAR missed (the blind spot under the sensor, the gaps between sparse rings)
+    # are filled where observed ground bounds them on all sides. False: voxel slabs everywhere, no fill.
     ground_fill: bool = True
     ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
     ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
