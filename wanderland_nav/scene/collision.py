@@ -306,16 +306,30 @@ def _occupancy_grid(ijk: np.ndarray, zmean: np.ndarray, lo: np.ndarray, vox: flo
     return grid, dims, origin, surface
 
 
+def _with_ground_sheet(verts_nav: np.ndarray, faces: np.ndarray, surface: GroundSurface | None, origin: np.ndarray,
+                       vox: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The marching-cubes mesh (nav frame) plus the ground sheet: `(verts, faces, protected bool [F] or None)`,
+    protected = faces of voxels in the ground step's obstacle columns (their centre inside such a column):
+    a sparse LiDAR's few returns on a car are real obstacles, not noise for the small-component filter."""
+    if surface is None:
+        return verts_nav, faces, None
+    ij = np.floor((verts_nav[faces].mean(1)[:, :2] - origin[:2]) / vox).astype(np.int64)
+    ij = np.clip(ij, 0, np.array(surface.obstacle.shape) - 1)
+    sheet_v, sheet_f = sheet_mesh(surface, origin[:2], vox)
+    return (np.concatenate([verts_nav, sheet_v]), np.concatenate([faces, sheet_f + len(verts_nav)]),
+            np.concatenate([surface.obstacle[ij[:, 0], ij[:, 1]], np.zeros(len(sheet_f), bool)]))
+
+
 def _filter_faces(verts_nav: np.ndarray, faces: np.ndarray, cams_nav: np.ndarray, cfg: CollisionSettings,
-                  meta: dict, obstacle_of=None) -> tuple[np.ndarray, np.ndarray]:
-    """Drop hidden ceiling/roof tops (only when capture positions exist), then small components, except those
-    `obstacle_of(face centres [F,3]) -> bool [F]` calls obstacles; nav frame.
+                  meta: dict, protected: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Drop hidden ceiling/roof tops (only when capture positions exist), then small components except
+    `protected` ones (`bool [F]`); nav frame.
     Returns the reindexed `(verts [V,3], faces [F,3])`; records the hidden-top count in `meta`."""
     if cfg.drop_tops_above_capture is not None and cams_nav.shape[0]:
         keep_f = ~unseen_top_faces(verts_nav, faces, cams_nav, cfg.drop_tops_above_capture)
         meta["hidden_top_faces_dropped"] = int((~keep_f).sum())
         faces = faces[keep_f]
-    protected = None if obstacle_of is None else obstacle_of(verts_nav[faces].mean(1))
+        protected = None if protected is None else protected[keep_f]
     return drop_small_components(verts_nav, faces, cfg.min_component_faces, protected)
 
 
@@ -370,19 +384,12 @@ def extract_collision_mesh(points, camera_centers, up_axis: str, voxel_size: flo
 
     # voxel (i,j,k) centre sits at origin + (ijk + 0.5) * vox; marching cubes works on centres
     verts_nav = origin + (verts_idx + 0.5) * vox
-    obstacle_of = None
-    if surface is not None:
-        sheet_v, sheet_f = sheet_mesh(surface, origin[:2], vox)
-        verts_nav, faces = np.concatenate([verts_nav, sheet_v]), np.concatenate([faces, sheet_f + len(verts_nav)])
-
-        def obstacle_of(c):  # faces of voxels in the ground step's obstacle columns (centre inside the column)
-            ij = np.clip(np.floor((c[:, :2] - origin[:2]) / vox).astype(np.int64), 0, dims[:2] - 1)
-            return surface.obstacle[ij[:, 0], ij[:, 1]]
+    verts_nav, faces, protected = _with_ground_sheet(verts_nav, faces, surface, origin, vox)
     n_before = int(faces.shape[0])
 
     # 4. hidden tops, then small components
     t4 = time.perf_counter()
-    verts_nav, faces = _filter_faces(verts_nav, faces, cams @ Rn.T, cfg, meta, obstacle_of)
+    verts_nav, faces = _filter_faces(verts_nav, faces, cams @ Rn.T, cfg, meta, protected)
     timings["components_s"] = time.perf_counter() - t4
     meta["faces_before_filter"] = n_before
     verts_scene = verts_nav @ Rn  # row form of R^T p (R orthonormal)
