@@ -33,6 +33,14 @@ def run(cfg: DictConfig) -> dict:
              f"({sum(cam.split == 'val' for cam in scene.cameras)} val)",
              f"  collision mesh: {cm['faces']:,} faces from {cm['points_kept']:,}/{cm['points_in']:,} points"
              f" ({_took(cm)})"]
+    if cm.get("ground_fill"):
+        g = cm["ground_fill"]
+        lines.append(f"  ground sheet: {g.get('sheet_area_m2', 0.0):.0f} m2 at the measured ground height, "
+                     f"{g['filled_area_m2']:.0f} m2 of it filled where the scan saw no ground")
+    lf = cm.get("lidar_filter")
+    if lf and lf["min_range_m"] > 0:
+        lines.append(f"  LiDAR self-returns: {lf['points_dropped']:,} within {lf['min_range_m']} m of the sensor "
+                     f"dropped ({lf['source']})")
     if "navmesh" in rep:
         nm = rep["navmesh"]
         lines.append(f"  navmesh: {nm['area_m2']:.0f} m2 walkable in {nm['num_islands']} island(s) ({_took(nm)})")
