@@ -75,11 +75,13 @@ def plot(png: Path, nm, polys, poses, obst, road_xy, covered) -> None:
     plt.close(fig)
 
 
-def measure(scene_dir: Path, settings: CollisionSettings, cell_height: float, png: Path | None = None) -> dict:
+def measure(scene_dir: Path, settings: CollisionSettings, cell_height: float, png: Path | None = None,
+            max_climb: float | None = None) -> dict:
     from planners import NavMesh, NavMeshSettings
 
     scene = prepare_scene(scene_dir, force=True, collision=settings,
-                          navmesh=NavMeshSettings(up_axis="+z", cell_height=cell_height))
+                          navmesh=NavMeshSettings(up_axis="+z", cell_height=cell_height,
+                                                   **({} if max_climb is None else {"agent_max_climb": max_climb})))
     nm = NavMesh.load(scene.navmesh_path)
     ground = dict(np.load(DATA / "ground.npz"))
     polys = [np.asarray(p["xyz"])[:, :2] for p in json.loads((DATA / "drivable.json").read_text())["polygons"]]
@@ -135,6 +137,7 @@ def main(argv=None) -> None:
     ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
                     help="CollisionSettings fields, e.g. ground_fill=false ground_window=5")
     ap.add_argument("--cell-height", type=float, default=0.2, help="navmesh cell height (m): its floors round up")
+    ap.add_argument("--max-climb", type=float, default=None, help="navmesh agent_max_climb (m); default: the project's")
     ap.add_argument("--png", type=Path, default=None, help="write a top-down figure here")
     a = ap.parse_args(argv)
     if not (a.scene / "lidar").is_dir():
@@ -142,7 +145,7 @@ def main(argv=None) -> None:
     fields = {f.name: f.type for f in dataclasses.fields(CollisionSettings)}
     kw = {k: (v.lower() == "true") if fields[k] in (bool, "bool") else float(v)
           for k, v in (kv.split("=", 1) for kv in a.set)}
-    m = measure(a.scene, CollisionSettings(**kw), cell_height=a.cell_height, png=a.png)
+    m = measure(a.scene, CollisionSettings(**kw), cell_height=a.cell_height, png=a.png, max_climb=a.max_climb)
     print(f"av2 street, ground_fill={m['ground_fill']}, navmesh cell_height {m['cell_height']} m: navmesh {m['navmesh_area_m2']:.0f} m2 "
           f"(ground infill added {m['filled_area_m2']:.0f} m2)")
     print(f"  road in the 15 m region: {m['road_m2']:.0f} m2, on the navmesh {100 * m['road_covered']:.1f} %")
