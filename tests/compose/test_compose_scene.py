@@ -18,6 +18,14 @@ def test_agent_radius_has_one_home_composed_by_every_entry_point(primary):
     assert c.navigation.navmesh.agent_radius == 0.3
 
 
+@pytest.mark.parametrize("primary", NAV_USERS)
+def test_street_preset_changes_only_the_climb(primary):
+    base = typed_config(compose_config(primary, []), SCHEMAS[primary]).navigation
+    street = typed_config(compose_config(primary, ["navigation=street"]), SCHEMAS[primary]).navigation
+    assert street.navmesh.agent_max_climb == 0.4 and base.navmesh.agent_max_climb == 0.9
+    assert street.collision == base.collision and street.navmesh.agent_radius == base.navmesh.agent_radius
+
+
 def test_no_other_config_file_sets_navmesh_or_collision_settings():
     from wanderland_nav.compose import CONF_DIR
 
