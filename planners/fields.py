@@ -73,11 +73,12 @@ class GeodesicField:
     def __len__(self) -> int:
         return self.goal_xy.shape[0]
 
-    def raster(self):
-        """The O(1) per-step lookup for the same goals (`planners.raster.GeodesicRaster`)."""
+    def raster(self, cache_dir=None):
+        """The O(1) per-step lookup for the same goals (`planners.raster.GeodesicRaster`); each goal's raster
+        is built on its first lookup, or read from the cache (memory, and `cache_dir` on disk when given)."""
         from planners.raster import GeodesicRaster
 
-        return GeodesicRaster(self)
+        return GeodesicRaster(self, cache_dir=cache_dir)
 
     def lookup(self, points, goal_index) -> torch.Tensor:
         """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B].
