@@ -41,7 +41,6 @@ class VisiblePairs:
 
 def visible_pairs(field, samples: np.ndarray, sample_tri_island: np.ndarray) -> VisiblePairs:
     """The visible tangent corners of every sample (local frame samples[P,3]), corners of its own island only."""
-    n = field._np
     P = samples.shape[0]
     island = field._island_np(samples)
     island = np.where(island == sample_tri_island, island, -1)
@@ -50,16 +49,12 @@ def visible_pairs(field, samples: np.ndarray, sample_tri_island: np.ndarray) -> 
     for isl in np.unique(island[island >= 0]):  # per island (a handful): its own corners only
         rows = np.flatnonzero(island == isl)
         cand = np.flatnonzero(node_island == isl)
-        S = cand.shape[0]
-        if S == 0:
+        if cand.shape[0] == 0:
             continue
-        lin_c = n["lin"][:, :2, cand].reshape(4, -1)  # the two tangency cross products, affine in p
         for j in range(0, rows.shape[0], _ROWS_PER_CHUNK):
             r = rows[j:j + _ROWS_PER_CHUNK]
             qx, qy = samples[r, 0], samples[r, 1]
-            q4 = np.stack([qx, qy, np.ones_like(qx), qx * qx + qy * qy], 1)
-            lin = q4 @ lin_c  # [R, 2S]
-            ri, ci = np.nonzero(lin[:, :S] * lin[:, S:] >= -1e-9)  # the tangency rule of `_lookup_simple`
+            ri, ci = np.nonzero(np.isfinite(field.bend_distances(qx, qy, cand)))  # `query_local`'s candidates
             seen = field._sees(cand[ci], qx[ri], qy[ri])
             rows_out.append(r[ri[seen]])
             corner_out.append(cand[ci[seen]])

@@ -27,7 +27,8 @@ import numpy as np
 from planners.atomic import atomic_path
 from planners.raster_build import VisiblePairs
 
-RASTER_VERSION = 2  # bump when the sources a build produces change (v1: per-goal exact queries, no cache)
+RASTER_VERSION = 3  # bump when the sources a build produces change (v1: per-goal exact queries, no cache; v2: batched;
+# v3: tangency margin `visibility.TANGENT_SLACK`)
 MEMORY_BUDGET = 512 << 20  # bytes of cached rows + pairs over all navmeshes in this process
 
 _MEMORY: "OrderedDict[str, dict]" = OrderedDict()  # navmesh key -> {"pairs": VisiblePairs|None, "rows": {goal: row}}
