@@ -75,9 +75,8 @@ class NavMesh:
 
     @property
     def content_hash(self) -> str:
-        """sha256 (16 hex) of what the navmesh *is*: settings, grid size, source mesh hash and every array
-        (dtype, shape, bytes). Not the bake time, not the file's bytes (a zip holds write timestamps), so two
-        bakes of the same mesh hash alike. Keys derived caches (rasters) and the run identity."""
+        """sha256 (16 hex) of what the navmesh *is*: settings, grid size, source mesh hash, every array. Not the
+        bake time nor the file's bytes (a zip holds write times): two bakes of one mesh hash alike (raster caches, run identity)."""
         if self._content_hash is None:
             h = hashlib.sha256(json.dumps({"format_version": FORMAT_VERSION, "settings": self.settings.to_dict(),
                                            "width": self.width, "height": self.height,

@@ -36,8 +36,8 @@ _MEMORY: "OrderedDict[str, dict]" = OrderedDict()  # navmesh key -> {"pairs": Vi
 
 def goal_key(goal_xy: np.ndarray, goal_tri: int) -> str:
     """16 hex of a goal's local xy (float64 bytes) and triangle."""
-    return hashlib.sha256(np.asarray(goal_xy, np.float64).tobytes() + int(goal_tri).to_bytes(8, "little",
-                                                                                            signed=True)).hexdigest()[:16]
+    tri = int(goal_tri).to_bytes(8, "little", signed=True)
+    return hashlib.sha256(np.asarray(goal_xy, np.float64).tobytes() + tri).hexdigest()[:16]
 
 
 def clear_memory() -> None:
