@@ -15,7 +15,7 @@ import torch
 
 from planners.path import _located, _visible_to_nodes
 from planners.threads import single_thread
-from planners.visibility import VisPolys, bucketed_fan_index, tangent_ok, visible
+from planners.visibility import VisPolys, bucketed_fan_index, corner_slack, tangent_from, tangent_ok, visible
 
 
 def _cross_lin(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -73,11 +73,12 @@ class GeodesicField:
     def __len__(self) -> int:
         return self.goal_xy.shape[0]
 
-    def raster(self):
-        """The O(1) per-step lookup for the same goals (`planners.raster.GeodesicRaster`)."""
+    def raster(self, cache_dir=None):
+        """The O(1) per-step lookup for the same goals (`planners.raster.GeodesicRaster`); each goal's raster
+        is built on its first lookup, or read from the cache (memory, and `cache_dir` on disk when given)."""
         from planners.raster import GeodesicRaster
 
-        return GeodesicRaster(self)
+        return GeodesicRaster(self, cache_dir=cache_dir)
 
     def lookup(self, points, goal_index) -> torch.Tensor:
         """Geodesic (horizontal) distance `[B]` from scene-frame points[B,3] to goals goal_index[B].
@@ -166,6 +167,7 @@ class GeodesicField:
             "lin": np.stack([np.concatenate([_cross_lin(a, prev), np.zeros((1, M))]),
                              np.concatenate([_cross_lin(a, nxt) * tang, np.zeros((1, M))]),
                              np.stack([-2 * a[:, 0], -2 * a[:, 1], (a * a).sum(1), np.ones(M)])], 1),
+            "slack": np.stack(corner_slack(a, prev, nxt)),  # [2, M] tangency margins (visibility.tangent_from)
             "vis": _combined_vis(nm.vispolys, self.goal_vis, M),
             "span_floor": t["span_floor"].numpy(), "span_island": t["span_island"].numpy(),
             "R_T": nm.R_t.numpy().T.copy(), "bmin": nm.bmin_t.numpy(),
@@ -224,6 +226,23 @@ class GeodesicField:
         src = np.flatnonzero(n["c2g_fin"][np.unique(gr)].any(0))
         return src, n["lin"][:, :, src].reshape(4, -1), n["c2g"][gr[:, None], src[None, :]]
 
+    def bend_distances(self, qx, qy, src, lin_c=None):
+        """`[R,S]` |p a| from points q[R] to corners src[S], inf where no path from p can bend around a
+        (`visibility.tangent_from`). Both cross products and |p a|^2 are affine/quadratic in p: one
+        [R,4] @ [4,3S] product (`lin_c`: the corners' columns of the `lin` table, when cached)."""
+        n = self._np
+        S = src.shape[0]
+        if lin_c is None:
+            lin_c = n["lin"][:, :, src].reshape(4, -1)
+        q4 = np.empty((qx.shape[0], 4))
+        q4[:, 0], q4[:, 1], q4[:, 2], q4[:, 3] = qx, qy, 1.0, qx * qx + qy * qy
+        lin = q4 @ lin_c  # [R,3S]: cross(a-p, prev-p), cross(a-p, next-p), |a - p|^2
+        s1, s2, sq = lin[:, :S], lin[:, S:2 * S], lin[:, 2 * S:]
+        np.maximum(sq, 0.0, out=sq)
+        dist = np.sqrt(sq, out=sq)
+        np.copyto(dist, np.inf, where=~tangent_from(s1, s2, dist, n["slack"][0, src], n["slack"][1, src]))
+        return dist
+
     def _lookup_simple(self, loc, gi):
         """Goals on single-level islands, numpy, no Python loop over points.
 
@@ -254,18 +273,10 @@ class GeodesicField:
             return out
         R = rows.shape[0]
         qx, qy = px[rows], py[rows]
-        # both tangency cross products and |p a|^2 are affine/quadratic in p: one [R,4] @ [4,3S] product
-        # (rounding differs from the direct form by ~1e-12 m^2; the tangency test keeps a margin
-        # so near-collinear corners stay candidates, which can only add valid paths)
-        q4 = np.empty((R, 4))
-        q4[:, 0], q4[:, 1], q4[:, 2], q4[:, 3] = qx, qy, 1.0, qx * qx + qy * qy
-        lin = q4 @ lin_c  # [R,3S]: cross(a-p, prev-p), cross(a-p, next-p), |a - p|^2
-        s1, s2, sq = lin[:, :S], lin[:, S:2 * S], lin[:, 2 * S:]
-        np.maximum(sq, 0.0, out=sq)
-        val = np.sqrt(sq, out=sq)
+        # (rounding of the affine form differs from the direct one by ~1e-12 m^2; the tangency margin
+        # keeps near-collinear corners candidates, which can only add valid paths)
+        val = self.bend_distances(qx, qy, src, lin_c)
         val += c2g_c  # inf where the corner does not lead to the goal
-        np.multiply(s1, s2, out=s1)
-        np.copyto(val, np.inf, where=s1 < -1e-9)  # only corners a path can bend around (s2 == 0: no tangency needed)
         K = min(self.ROUND_K, S)
         top = np.argpartition(val, K - 1, axis=1)[:, :K] if K < S else np.broadcast_to(np.arange(S), (R, S))
         tv = np.take_along_axis(val, top, 1)  # [R,K] the K cheapest, unordered

@@ -69,8 +69,24 @@ class NavMesh:
         self.source_hash = source_hash
         for k in _ARRAYS:
             setattr(self, k, np.asarray(arrays[k]))
-        self.bake_seconds = float(arrays.get("bake_seconds", 0.0))
+        self.bake_seconds = float(arrays.get("bake_seconds", 0.0))  # timing only: in no hash, never compared
+        self._content_hash = None
         self._prepare()
+
+    @property
+    def content_hash(self) -> str:
+        """sha256 (16 hex) of what the navmesh *is*: settings, grid size, source mesh hash, every array. Not the
+        bake time nor the file's bytes (a zip holds write times): two bakes of one mesh hash alike (raster caches, run identity)."""
+        if self._content_hash is None:
+            h = hashlib.sha256(json.dumps({"format_version": FORMAT_VERSION, "settings": self.settings.to_dict(),
+                                           "width": self.width, "height": self.height,
+                                           "source_hash": self.source_hash}, sort_keys=True).encode())
+            for k in _ARRAYS:
+                a = np.ascontiguousarray(getattr(self, k))
+                h.update(f"{k}:{a.dtype.str}:{a.shape}".encode())
+                h.update(a.tobytes())
+            self._content_hash = h.hexdigest()[:16]
+        return self._content_hash
 
     # ------------------------------------------------------------------ construction
 
@@ -132,7 +148,8 @@ class NavMesh:
     def save(self, path: str | Path) -> None:
         """Write every array plus the settings as one .npz (atomically)."""
         meta = {"format_version": FORMAT_VERSION, "settings": self.settings.to_dict(), "width": self.width,
-                "height": self.height, "source_hash": self.source_hash, "bake_seconds": self.bake_seconds}
+                "height": self.height, "source_hash": self.source_hash, "content_hash": self.content_hash,
+                "bake_seconds": self.bake_seconds}
         arrays = {k: getattr(self, k) for k in _ARRAYS}
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:

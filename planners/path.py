@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from planners.visibility import bucketed_fan_index, tangent_ok, visible
+from planners.visibility import bucketed_fan_index, corner_slack, tangent_from, tangent_ok, visible
 
 
 class PathResult(NamedTuple):
@@ -143,6 +143,7 @@ class _NumpyTables:
         self.node_xy = t["node_xy"].numpy()
         self.node_prev, self.node_next = t["node_prev"].numpy(), t["node_next"].numpy()
         self.node_tangent = t["node_tangent"].numpy()
+        self.slack_prev, self.slack_next = corner_slack(self.node_xy, self.node_prev, self.node_next)
         self.D = t["D"].numpy()
         vp = nm.vispolys
         self.keys, h = vp.keys.numpy(), vp.hits.numpy().reshape(-1, 2)
@@ -203,7 +204,8 @@ class _NumpyTables:
         pv, nx = self.node_prev[m], self.node_next[m]
         s1 = dx * (pv[:, 1] - p[1]) - dy * (pv[:, 0] - p[0])
         s2 = dx * (nx[:, 1] - p[1]) - dy * (nx[:, 0] - p[0])
-        m = m[(s1 * s2 >= 0) | ~self.node_tangent[m]]
+        sp, sn = self.slack_prev[m], self.slack_next[m]
+        m = m[tangent_from(s1, s2, np.hypot(dx, dy), sp, sn) | ~self.node_tangent[m]]
         m = m[self.sees(m, np.full(m.shape[0], p[0]), np.full(m.shape[0], p[1]))]
         return m, np.sqrt(np.square(p[0] - self.node_xy[m, 0]) + np.square(p[1] - self.node_xy[m, 1]))
 

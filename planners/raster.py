@@ -33,11 +33,14 @@ centre's (almost everywhere: sources change only across the shadow lines of corn
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from planners.fields import GeodesicField
+from planners.raster_build import simple_sources, visible_pairs
+from planners.raster_cache import RasterCache, goal_key
 from planners.threads import single_thread
 from planners.walk import closest_point_in_tri, walk
 
@@ -49,7 +52,7 @@ class GeodesicRaster:
 
     `stats` counts queries and how many fell back to the exact field (`exact_fallbacks`)."""
 
-    def __init__(self, field: GeodesicField):
+    def __init__(self, field: GeodesicField, cache_dir: str | Path | None = None):
         t0 = time.perf_counter()
         self.field = field
         nm = self.nm = field.nm
@@ -59,9 +62,15 @@ class GeodesicRaster:
         self._c2g = np.concatenate([field.corner_to_goal.numpy(), np.zeros((len(field), 1))], 1)  # [G, M+1]
         self._tol = max(0.5, nm.settings.agent_max_climb)  # m: as the navmesh's own point location
         with single_thread():
-            self._pair_id, samples = self._samples()  # [ncols, K], [P, 3]
-            self.source = self._build_sources(samples)  # [G, P] int32
-        self.build_seconds = time.perf_counter() - t0
+            self._pair_id, self._sample_xyz = self._samples()  # [ncols, K], [P, 3]
+        c, k = np.nonzero(self._pair_id >= 0)
+        self._sample_island = nm.tri_island[nm.col_tris[c, k]]  # [P] triangle island, in pair order
+        P = self._sample_xyz.shape[0]
+        self.source = np.full((len(field), P), -1, dtype=np.int32)  # [G, P]; row g valid once built[g]
+        self.built = np.zeros(len(field), dtype=bool)
+        self._goal_keys = [goal_key(xy, tri) for xy, tri in zip(field.goal_xy.numpy(), field.goal_tri.numpy())]
+        self.cache = RasterCache(nm, P, cache_dir)
+        self.build_seconds = time.perf_counter() - t0  # grows as goals are built (lazily, on first lookup)
         self.stats = {"queries": 0, "exact_fallbacks": 0}
 
     @property
@@ -71,6 +80,26 @@ class GeodesicRaster:
 
     def __len__(self) -> int:
         return len(self.field)
+
+    def ensure(self, goal_index=None) -> None:
+        """Make the rasters of goals goal_index (default: all) ready: from the cache, else built in one batch.
+        `lookup` calls it, so goals no episode reaches are never built."""
+        gi = np.arange(len(self)) if goal_index is None else np.asarray(goal_index, dtype=np.int64).reshape(-1)
+        need = np.unique(gi[~self.built[gi]])
+        if need.shape[0] == 0:
+            return
+        t0 = time.perf_counter()
+        found = self.cache.get([self._goal_keys[g] for g in need])
+        hit = np.array([self._goal_keys[g] in found for g in need], dtype=bool)
+        for g in need[hit]:
+            self.source[g] = found[self._goal_keys[g]]
+        todo = need[~hit]
+        if todo.shape[0]:
+            with single_thread():
+                self.source[todo] = self._build_sources(todo)
+            self.cache.put([self._goal_keys[g] for g in todo], self.source[todo])
+        self.built[need] = True
+        self.build_seconds += time.perf_counter() - t0
 
     def _samples(self) -> tuple[np.ndarray, np.ndarray]:
         """One sample point per (cell, triangle) overlap: the triangle's point nearest the cell centre,
@@ -85,18 +114,23 @@ class GeodesicRaster:
         z = nm.surface_z(tri, xy)
         return pair_id, torch.cat([xy, z[:, None]], 1).numpy()
 
-    def _build_sources(self, samples: np.ndarray) -> np.ndarray:
-        """`[G, P]` source of every sample for every goal (-1: other island or apart)."""
-        nm, field = self.nm, self.field
-        out = np.full((len(field), samples.shape[0]), -1, dtype=np.int32)
-        c, k = np.nonzero(self._pair_id >= 0)
-        pair_island = nm.tri_island[nm.col_tris[c, k]]  # [P], in pair order
+    def _build_sources(self, goals: np.ndarray) -> np.ndarray:
+        """`[len(goals), P]` source of every sample for goals (-1: other island or apart). Goals on
+        single-level islands in one batch over the navmesh's cached visible pairs; the others (islands
+        with overlapping levels) by exact queries of their island's samples, in chunks."""
+        field, samples = self.field, self._sample_xyz
+        out = np.full((goals.shape[0], samples.shape[0]), -1, dtype=np.int32)
+        simple = field._goal_simple_np[goals]
+        if simple.any():
+            pairs = self.cache.pairs(lambda: visible_pairs(field, samples, self._sample_island))
+            out[simple] = simple_sources(field, pairs, samples, goals[simple])
         goal_island = field.goal_island.numpy()
-        for g in range(len(field)):  # per goal: its island's samples, in chunks
-            rows = np.flatnonzero(pair_island == goal_island[g])
-            for j in range(0, rows.shape[0], _BUILD_CHUNK):
-                r = rows[j:j + _BUILD_CHUNK]
-                out[g, r] = field.query_local(samples[r], np.full(r.shape[0], g, dtype=np.int64))[1]
+        for j in np.flatnonzero(~simple):  # per goal: its island's samples, in chunks
+            g = goals[j]
+            rows = np.flatnonzero(self._sample_island == goal_island[g])
+            for s in range(0, rows.shape[0], _BUILD_CHUNK):
+                r = rows[s:s + _BUILD_CHUNK]
+                out[j, r] = field.query_local(samples[r], np.full(r.shape[0], g, dtype=np.int64))[1]
         return out
 
     def lookup(self, points, goal_index) -> torch.Tensor:
@@ -112,6 +146,7 @@ class GeodesicRaster:
         return torch.from_numpy(d.astype(np.float32))
 
     def _lookup_local(self, loc: np.ndarray, gi: np.ndarray) -> np.ndarray:
+        self.ensure(gi)
         pair = self._pair_of(loc)
         s = np.where(pair >= 0, self.source[gi, np.maximum(pair, 0)], -1).astype(np.int64)
         ok = s >= 0

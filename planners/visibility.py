@@ -80,14 +80,38 @@ def node_triangles(tri_xy_t, tris, node_vert, node_pos) -> np.ndarray:
     return out
 
 
+# Tangency margin per metre. The corners sit NODE_OFFSET off the wall vertex, so a point p on (or within
+# ~0.1 mm of) the line of a wall edge through the vertex sees the edge's far end b on the wrong side of the
+# line p -> offset corner: cross(a - p, b - p) changes by up to NODE_OFFSET * |b - p| <= NODE_OFFSET * (|a - p|
+# + |b - a|) when a moves by NODE_OFFSET. Testing the sign against 0 dropped the corner a shortest path bends
+# around there (a jump of 10 m in the exact field 0.15 m away, experiments/navmesh/README.md). Twice that
+# margin: a corner kept in excess only adds a real, longer path, never a wrong one.
+TANGENT_SLACK = 2 * NODE_OFFSET
+
+
+def corner_slack(node_xy, node_prev, node_next):
+    """`[M]` margins TANGENT_SLACK * |prev - a| and * |next - a| of the corners (numpy or torch alike)."""
+    return (TANGENT_SLACK * ((node_prev - node_xy) ** 2).sum(-1) ** 0.5,
+            TANGENT_SLACK * ((node_next - node_xy) ** 2).sum(-1) ** 0.5)
+
+
+def tangent_from(s1, s2, dist, slack_prev, slack_next):
+    """Whether a path from p may bend at corner a, from s1 = cross(a - p, prev - p), s2 = cross(a - p, next - p)
+    and dist = |a - p|: not both wall neighbours clearly on opposite sides of the line p -> a (each beyond
+    its own margin). numpy or torch alike; s2 = 0 marks corners that need no tangency."""
+    opposite = (s1 * s2 < 0) & (abs(s1) > TANGENT_SLACK * dist + slack_prev) & (abs(s2) > TANGENT_SLACK * dist + slack_next)
+    return ~opposite
+
+
 def tangent_ok(from_xy: torch.Tensor, node_xy, node_prev, node_next, node_tangent) -> torch.Tensor:
     """A path arriving from `from_xy[Q,1,2]` may bend at node m only if both its wall neighbours lie
-    on one side of the line through them (the line is tangent to the wall). `[Q,M]` bool."""
+    on one side of the line through them (the line is tangent to the wall; `tangent_from`). `[Q,M]` bool."""
     dx = node_xy[None, :, 0] - from_xy[..., 0]
     dy = node_xy[None, :, 1] - from_xy[..., 1]
     s1 = dx * (node_prev[None, :, 1] - from_xy[..., 1]) - dy * (node_prev[None, :, 0] - from_xy[..., 0])
     s2 = dx * (node_next[None, :, 1] - from_xy[..., 1]) - dy * (node_next[None, :, 0] - from_xy[..., 0])
-    return (s1 * s2 >= 0) | ~node_tangent[None, :]
+    sp, sn = corner_slack(node_xy, node_prev, node_next)
+    return tangent_from(s1, s2, torch.hypot(dx, dy), sp[None], sn[None]) | ~node_tangent[None, :]
 
 
 class Walls:
@@ -309,4 +333,5 @@ def _pair_tangent(a, b, prev_b, next_b, tang_b) -> torch.Tensor:
     dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
     s1 = dx * (prev_b[:, 1] - a[:, 1]) - dy * (prev_b[:, 0] - a[:, 0])
     s2 = dx * (next_b[:, 1] - a[:, 1]) - dy * (next_b[:, 0] - a[:, 0])
-    return (s1 * s2 >= 0) | ~tang_b
+    sp, sn = corner_slack(b, prev_b, next_b)
+    return tangent_from(s1, s2, torch.hypot(dx, dy), sp, sn) | ~tang_b

@@ -84,3 +84,21 @@ def test_fit_default_folder_carries_scene_and_identity(tmp_path, monkeypatch):
     out = fit_run_dir(typed_config({}, FitRunConfig), "s", ident)
     assert out.parts == ("outputs", "fit", "s", ident["hash"][:8])
     assert json.loads((tmp_path / out / "identity.json").read_text())["hash"] == ident["hash"]
+
+
+def test_rebaking_the_same_mesh_keeps_the_scene_identity(tmp_path):
+    """navmesh.npz holds its bake time (and the zip its write time): neither may change the identity."""
+    import trimesh
+
+    from planners import NavMesh, NavMeshSettings
+
+    floor = trimesh.creation.box(bounds=[[0, 0, -0.1], [6, 4, 0.0]])
+    first = NavMesh.bake(floor, NavMeshSettings())
+    first.save(tmp_path / "navmesh.npz")
+    before = scene_identity(tmp_path)
+    again = NavMesh.bake(floor, NavMeshSettings())
+    again.bake_seconds = first.bake_seconds + 1.0  # another bake's timing, as measured
+    again.save(tmp_path / "navmesh.npz")
+    assert scene_identity(tmp_path) == before
+    NavMesh.bake(floor, NavMeshSettings(agent_radius=0.4)).save(tmp_path / "navmesh.npz")
+    assert scene_identity(tmp_path)["artefacts"]["navmesh.npz"] != before["artefacts"]["navmesh.npz"]

@@ -57,7 +57,7 @@ class FakeField:
         p = torch.as_tensor(to_nav(np.asarray(points_scene)), dtype=torch.float32)
         return (p - self.goals[goal_index]).norm(dim=-1)
 
-    def raster(self):
+    def raster(self, cache_dir=None):
         return self  # the convex room's field is already O(1)
 
 

@@ -32,9 +32,9 @@ def check_raster_against_exact(nm: NavMesh, n_points: int = 600, n_goals: int = 
     assert e.min() >= -1e-4 * (1 + exact[fin].max()), e.min()
     bound = 2 * np.sqrt(2) * nm.cs
     assert (np.abs(e) < 1e-3).mean() >= 0.97  # exact almost everywhere
-    # within the bound wherever the exact field itself is 1-Lipschitz (a few points beside corners
-    # are not: experiments/navmesh/README.md "raster")
-    assert (e <= bound + 1e-3).mean() >= 0.99, np.sort(e)[-10:]
+    # within the bound everywhere (before the tangency margin, 0.07-0.4 % of points beside wall edges were
+    # not: experiments/navmesh/README.md "Found in session 2, fixed in session 3")
+    assert (e <= bound + 1e-3).all(), np.sort(e)[-10:]
     assert raster.stats["queries"] == n_points
     return e
 

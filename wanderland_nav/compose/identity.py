@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import zipfile
 from pathlib import Path
+
+import numpy as np
 
 #: keys that change how a run looks, not what it computes (dotted paths into the resolved config)
 COSMETIC_KEYS = ("progress", "run_dir", "out_dir", "out", "logger", "save_rollouts", "save_frames", "exp_name",
@@ -35,6 +38,22 @@ def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
     return h.hexdigest()
 
 
+def artefact_digest(path: Path) -> str:
+    """What a run depends on in a prepared artefact: its bytes, except `navmesh.npz`, whose stored
+    `content_hash` (planners.NavMesh.content_hash: settings and arrays) is used. Its bytes also hold the
+    bake time and the zip's write timestamps, so a rebake of identical geometry would otherwise change
+    the identity. Files without the field (older bakes, not a navmesh) fall back to the bytes."""
+    if path.suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                content = json.loads(str(z["meta"])).get("content_hash") if "meta" in z.files else None
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            content = None
+        if content:
+            return f"navmesh-content:{content}"
+    return file_sha256(path)
+
+
 def scene_identity(root, episodes_path=None, files: dict | None = None) -> dict:
     """`{"path", "artefacts": {file: sha256}}` of the scene: its prepared artefacts (default) or `files`
     (name -> path), plus the episodes file the run uses."""
@@ -42,7 +61,7 @@ def scene_identity(root, episodes_path=None, files: dict | None = None) -> dict:
     files = dict(files) if files is not None else {name: root / name for name in SCENE_ARTEFACTS}
     if episodes_path is not None:
         files["episodes.json"] = Path(episodes_path).resolve()
-    return {"path": str(root), "artefacts": {n: file_sha256(Path(p)) for n, p in sorted(files.items())
+    return {"path": str(root), "artefacts": {n: artefact_digest(Path(p)) for n, p in sorted(files.items())
                                              if Path(p).is_file()},
             "episodes_path": str(episodes_path) if episodes_path is not None else None}
 

@@ -142,7 +142,11 @@ class ExpertPolicy(TensorDictModuleBase):
         Why: a navmesh shortest path touches the walkable boundary at every corner, so a body that
         drifts a few centimetres to the wrong side of a corner meets the wall and cannot enter a
         narrow passage. The obstacle lies inside the turn; the corner moves by the largest of
-        `offsets` (metres) along the outward bisector that stays on the navmesh.
+        `offsets` (metres) along the outward bisector that stays on the navmesh and keeps both of its
+        segments walkable. Without the segment test a corner eased away from one obstacle could send
+        the path through another (demo episode 68: a wall wedge 0.14 m beside the route; the expert
+        then pushed into the wedge until `stuck_steps`). Corners whose segments stay blocked step down
+        to smaller offsets, and to the planner's own corner (offset 0) last.
         """
         if len(p) < 3:
             return p
@@ -151,15 +155,33 @@ class ExpertPolicy(TensorDictModuleBase):
         out = d[:-1] - d[1:]  # [P-2, 2] points away from the inside of each turn
         n = np.linalg.norm(out, axis=-1, keepdims=True)
         out = np.where(n > 1e-3, out / np.maximum(n, 1e-9), 0.0)
-        cand = p[1:-1, None, :].repeat(len(offsets), 1).copy()  # [P-2, O, 3]
-        cand[..., :2] += out[:, None, :] * np.asarray(offsets)[None, :, None]
+        levels = np.asarray([*offsets, 0.0])  # [O+1] metres, the last one the planner's corner
+        cand = p[1:-1, None, :].repeat(len(levels), 1).copy()  # [P-2, O+1, 3]
+        cand[..., :2] += out[:, None, :] * levels[None, :, None]
         ok = env._navigable(torch.as_tensor(cand.reshape(-1, 3), dtype=torch.float32)).cpu().numpy()
-        ok = ok.reshape(len(p) - 2, len(offsets))
-        first = np.where(ok.any(1), ok.argmax(1), -1)
+        ok = ok.reshape(len(p) - 2, len(levels))
+        ok[:, -1] = True
+        level = ok.argmax(1)  # [P-2] largest navigable offset per corner
+        rows = np.arange(len(p) - 2)
+        for _ in range(len(levels)):  # step blocked corners down; each round moves some corner one level
+            q = p.copy()
+            q[1:-1] = cand[rows, level]
+            clear = ExpertPolicy._walkable(env, q[:-1], q[1:])  # [P-1] segments
+            bad = ~(clear[:-1] & clear[1:]) & (level < len(levels) - 1)  # corners beside a blocked segment
+            if not bad.any():
+                break
+            for r in np.flatnonzero(bad):  # next navigable level (a few corners, a few levels)
+                level[r] = level[r] + 1 + ok[r, level[r] + 1:].argmax()
         q = p.copy()
-        sel = first >= 0
-        q[1:-1][sel] = cand[sel, first[sel]]
+        q[1:-1] = cand[rows, level]
         return q
+
+    @staticmethod
+    def _walkable(env, a: np.ndarray, b: np.ndarray, tol: float = 0.02) -> np.ndarray:
+        """`[S]` whether the motion model walks each straight segment a[S,3] -> b[S,3] (nav) to within `tol`
+        metres of its end (a slide along a wall it merely grazes still counts)."""
+        end, _ = env._move(torch.as_tensor(a, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32))
+        return (np.linalg.norm(end.cpu().numpy()[:, :2] - b[:, :2], axis=-1) <= tol)
 
     def reset(self) -> None:
         self._progress = None

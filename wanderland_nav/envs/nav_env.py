@@ -26,6 +26,7 @@ import logging
 import time
 import warnings
 from collections import defaultdict
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -123,7 +124,9 @@ class NavEnv(EnvBase):
             self.episodes, scene, self.navmesh, instruction_length=cfg.instruction_length, where=where
         ).to(self.device)
         self.field = self.navmesh.distance_field(self.table.field_goals_scene)  # exact: lengths and checks
-        self.step_field = self.field.raster()  # O(1) per step, same goals
+        # O(1) per step, same goals; each goal's raster built on its first reset, cached beside the navmesh
+        navmesh_path = getattr(scene, "navmesh_path", None)
+        self.step_field = self.field.raster(cache_dir=Path(navmesh_path).parent if navmesh_path else None)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
         self._init_goal_images(where, goal_images)
         if cfg.termination.success_radius is not None:
