@@ -169,17 +169,37 @@ def _alpha_from_coefs(q: torch.Tensor, coords: torch.Tensor, coords2: torch.Tens
 
 
 def forward_chunk(rows, center, valid, T_in, coords, coords2, uv, threshold: float, check_termination: bool):
-    """One chunk of the forward composite: (contribution [Ta, P, D+1] = sum_j w_j [c_j, 1], T_out [P, Ta]).
+    """One chunk of the forward composite: (contribution [Ta, P, D+1] = sum_j w_j [c_j, 1], T_out [Ta, P]).
 
-    rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [P, Ta]. The hot stage of the renderer:
-    `compiled.py` hands exactly this function to torch.compile (there `check_termination=False`, the
-    data-dependent early-out that would break the graph; masking always gives the same result).
+    rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [Ta, P]. Tile-major layout [Ta, P, L]:
+    the transmittance scan runs along the contiguous last dim and the colour sum is a plain bmm with
+    no transposed copy (the backward keeps its pixel-major layout for its K=P GEMM). The hot stage of
+    the renderer: `compiled.py` hands exactly this function to torch.compile (there
+    `check_termination=False`, the data-dependent early-out that would break the graph; masking always
+    gives the same result).
     """
-    q, _, _ = _quad_coefs(rows, center, valid)
-    alpha = _alpha_from_coefs(q, coords, coords2, uv).clamp_(max=ALPHA_MAX)
-    alpha = torch.nn.functional.threshold(alpha, threshold, 0.0)
-    nT, w = _transmittance(alpha, T_in, check_termination=check_termination)
-    return torch.bmm(w.permute(1, 0, 2), rows[..., 6:]), nT[:, :, -1]
+    Ta, L, _ = rows.shape
+    q, _, _ = _quad_coefs(rows, center, valid)  # [6, Ta, L]
+    c, c2 = coords[None, :, None], coords2[None, :, None]  # [1, ts, 1]
+    X = torch.addcmul(torch.addcmul(q[5][:, None], c, q[3][:, None]), c2, q[0][:, None])  # [Ta, ts(u), L]
+    Y = torch.addcmul(c * q[4][:, None], c2, q[1][:, None])  # [Ta, ts(v), L]
+    s = torch.add(Y[:, :, None, :], X[:, None, :, :])  # [Ta, v, u, L]
+    s = s.addcmul_(uv[None, :, :, None], q[2][:, None, None, :]).view(Ta, -1, L)  # [Ta, P, L]
+    alpha = s.clamp_(min=-30.0).exp_().clamp_(max=ALPHA_MAX)  # clamp at -30: no denormals (see _alpha_raw)
+    alpha = torch.nn.functional.threshold_(alpha, threshold, 0.0)
+    nT = torch.rsub(alpha, 1.0)
+    nT[:, :, 0].mul_(T_in)
+    nT.cumprod_(dim=-1)  # transmittance after each entry
+    w = alpha
+    w[:, :, 0].mul_(T_in)
+    w[:, :, 1:].mul_(nT[:, :, :-1])  # w_j = alpha_j T_j
+    # gsplat: a pixel stops at the first entry whose next_T <= 1e-4 (that one excluded): nT is
+    # non-increasing, so the excluded entries are exactly nT <= 1e-4 (bool masks: no float copies).
+    if not check_termination or bool(((nT[:, :, -1] <= T_EPS) & (T_in > 0)).any()):
+        done = nT <= T_EPS
+        nT.masked_fill_(done, 0.0)
+        w.masked_fill_(done, 0.0)
+    return torch.bmm(w, rows[..., 6:]), nT[:, :, -1]
 
 
 def _transmittance(alpha: torch.Tensor, T_in: torch.Tensor, check_termination: bool):
@@ -261,12 +281,13 @@ class _Cursor:
         valid = j < self.ends[:, None]
         return L, j.clamp_(max=self.n_entries - 1), valid
 
-    def advance(self, L: int, T: torch.Tensor):
-        """Consume L entries; returns (kept, gone) device index tensors when the active set shrinks."""
+    def advance(self, L: int, alive: torch.Tensor):
+        """Consume L entries (alive [Ta] bool: some pixel of the tile still transmits); returns
+        (kept, gone) device index tensors when the active set shrinks."""
         self.consumed += L
         if not self.compact:
             return None, None
-        keep = (self.counts_h > self.consumed) & (T > 0).any(0).cpu().numpy()
+        keep = (self.counts_h > self.consumed) & alive.cpu().numpy()
         if keep.all():
             return None, None
         kept = torch.as_tensor(np.nonzero(keep)[0], device=self.device)
@@ -343,7 +364,7 @@ class _RasterizeFn(torch.autograd.Function):
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
             center = geo.centers(tiles)
-            T = geo.in_image(tiles)  # [P, Ta]
+            T = geo.in_image(tiles).t().contiguous()  # [Ta, P]
             acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)  # [Ta, P, D+1]
             cur = _Cursor(plan, tiles_h, dev, compact=on_cpu)
             while cur.more():
@@ -354,10 +375,10 @@ class _RasterizeFn(torch.autograd.Function):
                 else:
                     contrib, T = kernel(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, False)
                 acc += contrib
-                kept, gone = cur.advance(L, T)
+                kept, gone = cur.advance(L, (T > 0).any(1))
                 if kept is not None:
                     out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
-                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(1, kept)
+                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(0, kept)
             if cur.active:
                 out.index_copy_(0, tiles, acc)
         img = geo.to_image(out)
@@ -426,7 +447,7 @@ class _RasterizeFn(torch.autograd.Function):
                 upd.mul_(valid)
                 g_rows.index_add_(1, e, upd.view(K, Ta * L))
                 T = nT[:, :, -1]
-                kept, _ = cur.advance(L, T)
+                kept, _ = cur.advance(L, (T > 0).any(0))
                 if kept is not None:
                     center, gt = center[kept], gt[kept]
                     T, rest0 = T.index_select(1, kept), rest0.index_select(1, kept)
