@@ -100,27 +100,49 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         order = torch.sort(_sortable_int(depths.detach()), stable=True).indices
         cnt_o = cnt.index_select(0, order)
         first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
-        wx_o = wx.index_select(0, order)
-        M = int(cnt_o.sum())
-        src = torch.repeat_interleave(torch.arange(V, device=dev), cnt_o, output_size=M)  # [M] depth-order slot
-        k = torch.arange(M, device=dev) - (torch.cumsum(cnt_o, 0) - cnt_o).index_select(0, src)
-        wg = wx_o.index_select(0, src)
-        dy = torch.div(k, wg, rounding_mode="floor")
-        dx = k - dy * wg  # [M] tile offsets inside each Gaussian's box
-        if conics is not None:  # blocks of CACHE_BLOCK entries: each temporary stays in L2 (2x faster)
+        rows = None
+        if conics is not None:
             rows = _tile_test_rows(m, x0, y0, conics, opacities, tile_size).index_select(0, order).t().contiguous()
-            hit = torch.cat([_touches_tile(rows.index_select(1, src[i:i + CACHE_BLOCK]), dx[i:i + CACHE_BLOCK],
-                                           dy[i:i + CACHE_BLOCK], tile_size) for i in range(0, M, CACHE_BLOCK)])
-            hit = hit.nonzero().squeeze(1)
-            src, dx, dy = src.index_select(0, hit), dx.index_select(0, hit), dy.index_select(0, hit)
-            M = src.numel()
-        tile = first_tile.index_select(0, src) + dy * tile_width + dx
-        if num_tiles < 2**31:  # narrower keys: the sort of all tile entries is the binning's largest cost
-            tile = tile.to(torch.int32)
+        tile, src = _expand_to_tiles(cnt_o, wx.index_select(0, order), first_tile, rows, tile_width, tile_size)
+        # narrower keys: the stable sort of all tile entries is the binning's largest cost
+        key_dtype = torch.int16 if num_tiles < 2**15 else torch.int32 if num_tiles < 2**31 else torch.int64
+        tile = tile.to(key_dtype)
         tile, perm = torch.sort(tile, stable=True)
         ent = order.index_select(0, src.index_select(0, perm))
-        counts = torch.bincount(tile, minlength=num_tiles)
+        counts = torch.bincount(tile.to(torch.int32), minlength=num_tiles)
     return ent, counts
+
+
+def _expand_to_tiles(cnt: torch.Tensor, wx: torch.Tensor, first_tile: torch.Tensor, rows: torch.Tensor | None,
+                     tile_width: int, tile_size: int):
+    """(tile ids [M], pair slots [M]) of every (pair, tile) entry, pairs in the given (depth) order.
+
+    cnt [V] tiles of each pair's box, wx [V] its width in tiles, first_tile [V] its top-left tile id;
+    rows [8, V] (`_tile_test_rows`) or None: with them, entries that fail `_touches_tile` are dropped.
+    Works in blocks of about CACHE_BLOCK entries (whole pairs) so every [block] temporary stays in L2;
+    nothing of size M but the two outputs is ever allocated.
+    """
+    dev = cnt.device
+    ends = torch.cumsum(cnt, 0)
+    M = int(ends[-1]) if len(ends) else 0
+    if M == 0:
+        return torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(0, dtype=torch.long, device=dev)
+    cuts = torch.searchsorted(ends, torch.arange(CACHE_BLOCK, max(M, CACHE_BLOCK), CACHE_BLOCK, device=dev), right=True)
+    bounds = [0] + sorted(set(cuts.tolist()) - {0, len(cnt)}) + [len(cnt)]
+    tiles, slots = [], []
+    for g0, g1 in zip(bounds[:-1], bounds[1:]):
+        c = cnt[g0:g1]
+        local = torch.repeat_interleave(torch.arange(g1 - g0, device=dev), c)  # [Mb] pair within the block
+        k = torch.arange(local.numel(), device=dev) - (torch.cumsum(c, 0) - c).index_select(0, local)
+        w = wx[g0:g1].index_select(0, local)
+        dy = torch.div(k, w, rounding_mode="floor")
+        dx = k - dy * w  # tile offsets inside the pair's box
+        if rows is not None:
+            hit = _touches_tile(rows[:, g0:g1].index_select(1, local), dx, dy, tile_size).nonzero().squeeze(1)
+            local, dx, dy = local.index_select(0, hit), dx.index_select(0, hit), dy.index_select(0, hit)
+        tiles.append(first_tile[g0:g1].index_select(0, local) + dy * tile_width + dx)
+        slots.append(local + g0)
+    return torch.cat(tiles), torch.cat(slots)
 
 
 def _tile_test_rows(means2d, x0, y0, conics, opacities, tile_size: int) -> torch.Tensor:
