@@ -14,10 +14,13 @@ into `B` independent scenes: camera b*C + c only sees Gaussians b*N + n.
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 
 from .projection import ALPHA_THRESHOLD, Projected, camera_jacobian, screen_space
 
+PAIR_BLOCK = 1 << 15  # candidate pairs per block of the EWA stage (its [block] temporaries fit in L2)
 RADIUS_SIGMAS = 3.33  # the reference's largest extent (in standard deviations) of a splat's bounding box
 
 
@@ -107,21 +110,36 @@ def project_packed(
     b, c, n, mc_all = _candidate_pairs(means, covars, opacities, viewmats, Ks, width, height, near_plane, far_plane,
                                        eps2d, camera_model)
     cam, gid = b * C + c, b * N + n
+    tables = (mc_all.reshape(-1), Ks.reshape(B * C, 9).t(), viewmats[..., :3, :3].reshape(B * C, 9).t(),
+              _sym6(covars).reshape(B * N, 6).t(), opacities.reshape(B * N))
+    opts = dict(width=width, height=height, eps2d=eps2d, near_plane=near_plane, far_plane=far_plane,
+                radius_clip=radius_clip, calc_compensations=calc_compensations, camera_model=camera_model)
+    # Blocks of PAIR_BLOCK pairs (camera-major order kept): every [block] temporary stays in L2.
+    parts = [_project_pairs(tables, cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK], N, **opts)
+             for i in range(0, max(cam.numel(), 1), PAIR_BLOCK)]
+    if len(parts) == 1:
+        return parts[0]
+    cat = lambda xs: None if xs[0] is None else torch.cat(xs)  # noqa: E731
+    return (torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts]),
+            Projected(*(cat([getattr(p[2], f.name) for p in parts]) for f in dataclasses.fields(Projected))))
+
+
+def _project_pairs(tables, cam: torch.Tensor, gid: torch.Tensor, N: int, *, width, height, eps2d, near_plane,
+                   far_plane, radius_clip, calc_compensations, camera_model):
+    """EWA projection of the candidate pairs (cam [M], gid [M]); -> the pairs with radii > 0 and their
+    `Projected`. tables: mc_all flat, Ks [9, B*C], R [9, B*C], cov6 [6, B*N], opacities [B*N]."""
+    mc_flat, Ks9, R9, cov6, opacities = tables
     M = cam.numel()
+    n = gid % N
     # Per-pair quantities as contiguous rows [k, M] (one gather each), viewed as [M, k] where needed.
     flat = (cam * (3 * N) + n)[None, :] + (torch.arange(3, device=cam.device) * N)[:, None]  # [3, M] into mc_all
-    mc = mc_all.reshape(-1).index_select(0, flat.reshape(-1)).view(3, M).t()  # [M, 3] camera frame
-    Kp = Ks.reshape(B * C, 9).t().index_select(1, cam).t().view(M, 3, 3)  # [M, 3, 3]
-    means2d, J = camera_jacobian(mc, Kp, width, height, camera_model)
-    R = viewmats[..., :3, :3].reshape(B * C, 9).t().index_select(1, cam)  # [9, M]
-    cov6 = _sym6(covars).reshape(B * N, 6).t().index_select(1, gid)  # [6, M]
-    c00, c01, c11 = _ewa_cov2d(J, R, cov6)
-    op = opacities.reshape(B * N).index_select(0, gid)
-    proj = screen_space(means2d, (c00, c01, c11), mc[:, 2], op, width, height, eps2d=eps2d,
-                        near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
+    mc = mc_flat.index_select(0, flat.reshape(-1)).view(3, M).t()  # [M, 3] camera frame
+    means2d, J = camera_jacobian(mc, Ks9.index_select(1, cam).t().view(M, 3, 3), width, height, camera_model)
+    c00, c01, c11 = _ewa_cov2d(J, R9.index_select(1, cam), cov6.index_select(1, gid))
+    proj = screen_space(means2d, (c00, c01, c11), mc[:, 2], opacities.index_select(0, gid), width, height,
+                        eps2d=eps2d, near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                         calc_compensations=calc_compensations)
     sel = (proj.radii > 0).all(-1).nonzero().squeeze(1)
     pick = lambda x: None if x is None else x.index_select(0, sel)  # noqa: E731
-    proj = Projected(*(pick(getattr(proj, f)) for f in ("means2d", "conics", "depths", "radii", "compensations",
-                                                         "opacities")))
+    proj = Projected(*(pick(getattr(proj, f.name)) for f in dataclasses.fields(Projected)))
     return cam.index_select(0, sel), gid.index_select(0, sel), proj
