@@ -86,7 +86,12 @@ def _stage_rows(g, V, K, res, repeat):
         one(g.means), one(cov), one(g.opacities), one(V), one(K), res, res))
     rows["packed: SH colours [M]"], _, pc = t(lambda: spherical_harmonics(
         g.sh_degree, g.means[gid] - campos[cam], g.sh_coeffs[gid]))
-    rows["packed: binning (sorts)"], _, _ = t(lambda: R.isect_packed(cam, pp.means2d, pp.radii, pp.depths, C, ts, T, T))
+    tile_test = ()  # the exact tile test (this branch) is part of the binning
+    if "conics" in inspect.signature(R.isect_packed).parameters:
+        tile_test = (pp.conics, g.opacities[gid])
+    rows["packed: binning (sorts)"], _, (ent, _) = t(lambda: R.isect_packed(cam, pp.means2d, pp.radii, pp.depths, C, ts,
+                                                                             T, T, *tile_test))
+    stats["packed_tile_entries"] = int(ent.numel())
     comp, _, _ = t(lambda: R.rasterize_packed(cam, pp.means2d, pp.conics, pc, g.opacities[gid], pp.radii, pp.depths,
                                               C, res, res, tile_size=ts))
     rows["packed: composite (excl. binning)"] = comp - rows["packed: binning (sorts)"]

@@ -1,7 +1,7 @@
 """torch.compile'd hot stages of the fast path (inductor's C++ backend on CPU, Triton on GPU).
 
 Why only these two: they are the elementwise-heavy stages that eager torch runs as dozens of
-separate passes over memory (the visible-pair EWA projection, and a chunk of the composite:
+separate passes over memory (a block of the visible-pair EWA projection, and a chunk of the composite:
 quadratic form -> alpha -> threshold -> transmittance -> weighted colour sum); inductor fuses each
 into a few loops. The binning (sorts, nonzero) and the host-side chunk plan stay eager: they have
 data-dependent shapes and are already single library calls. The eager functions remain the
@@ -19,7 +19,7 @@ import warnings
 
 import torch
 
-from .packed import project_packed
+from .packed import _project_pairs, project_packed
 from .rasterize import forward_chunk
 
 _warned = False
@@ -53,5 +53,11 @@ def _warn_once(msg: str) -> None:
                       stacklevel=3)
 
 
-project_packed_compiled = CompiledStage(project_packed)
+project_pairs_compiled = CompiledStage(_project_pairs)
 forward_chunk_compiled = CompiledStage(forward_chunk)
+
+
+def project_packed_compiled(*args, **kwargs):
+    """`packed.project_packed` with its per-block EWA stage compiled: the candidate cull (`nonzero`)
+    and the host-side block loop stay eager, so the compiled graph sees fixed-size blocks only."""
+    return project_packed(*args, pair_fn=project_pairs_compiled, **kwargs)

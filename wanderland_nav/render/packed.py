@@ -100,11 +100,13 @@ def project_packed(
     radius_clip: float = 0.0,
     calc_compensations: bool = False,
     camera_model: str = "pinhole",
+    pair_fn=None,
 ) -> tuple[torch.Tensor, torch.Tensor, Projected]:
     """-> (camera_ids [M] in 0..B*C-1, gaussian_ids [M] in 0..B*N-1, `Projected` with `[M]` leading dims).
 
     Only pairs with radii > 0 are returned (same set as the reference's `radii > 0`). Differentiable
-    in means, covars, opacities (through compensations) and viewmats.
+    in means, covars, opacities (through compensations) and viewmats. pair_fn: a drop-in for
+    `_project_pairs` (the torch.compile'd one from `compiled.py`, fixed-size blocks); None: eager.
     """
     B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
     b, c, n, mc_all = _candidate_pairs(means, covars, opacities, viewmats, Ks, width, height, near_plane, far_plane,
@@ -115,7 +117,8 @@ def project_packed(
     opts = dict(width=width, height=height, eps2d=eps2d, near_plane=near_plane, far_plane=far_plane,
                 radius_clip=radius_clip, calc_compensations=calc_compensations, camera_model=camera_model)
     # Blocks of PAIR_BLOCK pairs (camera-major order kept): every [block] temporary stays in L2.
-    parts = [_project_pairs(tables, cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK], N, **opts)
+    pair_fn = _project_pairs if pair_fn is None else pair_fn
+    parts = [pair_fn(tables, cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK], N, **opts)
              for i in range(0, max(cam.numel(), 1), PAIR_BLOCK)]
     if len(parts) == 1:
         return parts[0]
