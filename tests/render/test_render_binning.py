@@ -61,3 +61,29 @@ def test_tile_test_drops_entries_without_changing_the_image():
     exact = isect_packed(meta["camera_ids"], meta["means2d"], meta["radii"], meta["depths"], 3, TS, 10, 8,
                          meta["conics"], meta["opacities"])[0]
     assert exact.numel() < box.numel()
+
+
+def test_blocked_projection_and_binning_match_one_block(monkeypatch):
+    """Many small L2 blocks (pairs of the EWA stage, entries of the tile expansion) give the same
+    image, meta and gradients as one block: blocking is a schedule, not an approximation."""
+    import wanderland_nav.render.packed as packed
+    import wanderland_nav.render.rasterize as rasterize
+
+    args = list(random_scene(300, 3, 40, 32, torch.float64, seed=5))
+    args[:6] = [a.detach().requires_grad_() for a in args[:6]]  # Gaussians and viewmats
+
+    def run():
+        colors, alphas, meta = rasterization(*args, 40, 32, tile_size=TS, render_mode="RGB+ED")
+        grads = torch.autograd.grad(colors.square().sum() + alphas.sum(), args[:6])
+        return colors, meta, grads
+
+    one = run()
+    monkeypatch.setattr(packed, "PAIR_BLOCK", 37)
+    monkeypatch.setattr(rasterize, "CACHE_BLOCK", 53)
+    many = run()
+    assert one[1]["camera_ids"].numel() > 10 * 37  # many blocks really ran
+    torch.testing.assert_close(many[0], one[0], atol=1e-12, rtol=0)
+    assert torch.equal(many[1]["camera_ids"], one[1]["camera_ids"])
+    assert torch.equal(many[1]["gaussian_ids"], one[1]["gaussian_ids"])
+    for a, b in zip(many[2], one[2]):
+        torch.testing.assert_close(a, b, atol=1e-12, rtol=0)
