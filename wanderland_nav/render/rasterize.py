@@ -8,7 +8,9 @@ Semantics (gsplat 1.5, per pixel with centre (x+0.5, y+0.5), Gaussians in increa
 
 How it is fast in pure torch:
 * Tile lists come from two integer radix sorts (Gaussians by the bits of their depth, then pairs by
-  tile id, stable), never a float sort of all pairs.
+  tile id, stable), never a float sort of all pairs. The packed path keeps only the (pair, tile)
+  entries whose quadratic reaches alpha >= 1/255 somewhere on the tile's pixel-centre rectangle
+  (exact minimum, `_touches_tile`): a third of the box entries at the simulator's operating points.
 * -(sigma - log o) is a quadratic form in tile-local pixel coordinates (u, v); it is separable on the
   tile grid, so a chunk of L Gaussians is evaluated for all P pixels of Ta tiles with two full-size
   passes plus one exp. Small CPU tiles (4x4 by default) waste few evaluations on small splats.
@@ -241,9 +243,9 @@ def forward_chunk(rows, center, valid, T_in, coords, coords2, uv, threshold: flo
     rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [Ta, P]. Tile-major layout [Ta, P, L]:
     the transmittance scan runs along the contiguous last dim and the colour sum is a plain bmm with
     no transposed copy (the backward keeps its pixel-major layout for its K=P GEMM). The hot stage of
-    the renderer: `compiled.py` hands exactly this function to torch.compile (there
-    `check_termination=False`, the data-dependent early-out that would break the graph; masking always
-    gives the same result).
+    the renderer; `check_termination=False` (GPU schedule) skips the data-dependent early-out, which
+    a host sync would cost; masking always gives the same result. (torch.compile of this function
+    was measured slower than eager: see `compiled.py`.)
     """
     Ta, L, _ = rows.shape
     q, _, _ = _quad_coefs(rows, center, valid)  # [6, Ta, L]
@@ -417,7 +419,7 @@ class _RasterizeFn(torch.autograd.Function):
     """acc [C,H,W,D+1] = sum_j w_j [c_j, 1] from visible-Gaussian rows; see module docstring."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact, kernel):
+    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
@@ -437,10 +439,7 @@ class _RasterizeFn(torch.autograd.Function):
             while cur.more():
                 L, j, valid = cur.next_chunk()
                 rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(cur.active, L, K)
-                if kernel is None:
-                    contrib, T = forward_chunk(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
-                else:
-                    contrib, T = kernel(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, False)
+                contrib, T = forward_chunk(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
                 acc += contrib
                 kept, gone = cur.advance(L, (T > 0).any(1))
                 if kept is not None:
@@ -566,23 +565,19 @@ def rasterize_packed(
     tile_size: int = 16,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
-    kernel=None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair).
-
-    kernel: a drop-in for `forward_chunk` (the torch.compile'd one from `compiled.py`); None: eager."""
+    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair)."""
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH, conics, opacities)
     return _composite(means2d, conics, opacities, colors.to(means2d.dtype), ent, counts, C, width, height,
-                      tile_size, chunk_elems, schedule, kernel)
+                      tile_size, chunk_elems, schedule)
 
 
-def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule,
-               kernel=None):
+def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule):
     if schedule not in ("auto", "compact", "masked"):
         raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
     compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     D = colors.shape[-1]
     acc = _RasterizeFn.apply(means2d, conics, opacities, colors, ent, counts, C, height, width, tile_size,
-                             chunk_elems, compact, kernel)
+                             chunk_elems, compact)
     return acc[..., :D], acc[..., D:]
