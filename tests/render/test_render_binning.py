@@ -39,14 +39,14 @@ def _sigma_on_grid(means2d, conics, x0, y0, dx, dy, steps: int):
 
 
 def test_tile_test_is_the_exact_minimum_over_the_tile_rectangle():
-    means2d, conics, opac, x0, y0, dx, dy = _random_entries(4000)
+    means2d, conics, opac, x0, y0, dx, dy = _random_entries(1500)
     rows = _tile_test_rows(means2d, x0, y0, conics, opac, TS).t().contiguous()
     kept = _touches_tile(rows, dx, dy, TS)
     limit = torch.log(opac / ALPHA_MIN)
     at_centres = _sigma_on_grid(means2d, conics, x0, y0, dx, dy, TS)
     assert kept[at_centres <= limit].all()  # never drops an entry that some pixel centre keeps
-    fine = _sigma_on_grid(means2d, conics, x0, y0, dx, dy, 201)  # the continuous rectangle, finely sampled
-    clear = (fine - limit).abs() > 0.05  # away from the boundary, where sampling decides
+    fine = _sigma_on_grid(means2d, conics, x0, y0, dx, dy, 61)  # the continuous rectangle, finely sampled
+    clear = (fine - limit).abs() > 0.5  # away from the boundary, where the sampling step (0.05 px) could decide
     assert torch.equal(kept[clear], (fine <= limit)[clear])
     assert 0.05 < kept.double().mean() < 0.95 and clear.double().mean() > 0.8  # both outcomes, mostly decidable
 
