@@ -54,6 +54,8 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     cfg = NavEnvConfig()
     cfg.camera.width = cfg.camera.height = res
     cfg.camera.enabled = enabled
+    if hasattr(cfg, "goal_image"):
+        cfg.goal_image = "none"  # goal views are not the step's cost (and need files loaded by the caller)
     env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, device=device,
                        gaussians=gaussians.to(device), seed=0)
     policy = ExpertPolicy(env)

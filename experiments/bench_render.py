@@ -132,13 +132,15 @@ def _child(cfg: dict) -> dict:
     dev = cfg["device"]
     g, V, K = _scene(cfg["n"], cfg["C"], cfg["size"], dev)
     evals = [0]
-    orig = getattr(R, "_alpha_from_coefs", None)  # the new code's eager chunk kernel (old code: _alpha_raw)
+    if hasattr(R, "forward_chunk"):  # a83eb0b on: the forward's chunk kernel (pixels x entries evaluated)
+        orig = R.forward_chunk
 
-    def counting(q, coords, *rest):
-        evals[0] += coords.numel() ** 2 * q.shape[1] * q.shape[2]  # pixels x entries evaluated in this chunk
-        return orig(q, coords, *rest)
+        def counting(rows, center, valid, T_in, coords, *rest):
+            evals[0] += coords.numel() ** 2 * rows.shape[0] * rows.shape[1]
+            return orig(rows, center, valid, T_in, coords, *rest)
 
-    if orig is None:  # old code
+        R.forward_chunk = counting
+    else:  # be6d50d
         orig_raw = R._alpha_raw
 
         def counting(geo, q):  # noqa: F811
@@ -146,8 +148,6 @@ def _child(cfg: dict) -> dict:
             return orig_raw(geo, q)
 
         R._alpha_raw = counting
-    else:
-        R._alpha_from_coefs = counting
     fn = _baseline if cfg["impl"] == "baseline" else rasterization
     if cfg["impl"] == "compiled":
         fn = functools.partial(rasterization, compiled=True)

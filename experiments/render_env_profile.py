@@ -9,6 +9,7 @@ are skipped when the installed code has no `render.packed` (the old code).
 
 from __future__ import annotations
 
+import inspect
 import time
 from pathlib import Path
 
@@ -29,7 +30,14 @@ def env_views(B: int, res: int, max_gaussians: int | None):
     cfg = NavEnvConfig()
     cfg.camera.width = cfg.camera.height = res
     cfg.camera.enabled = False  # poses only; the renderer is what we time
-    env = make_nav_env(scene, config=cfg, batch_size=B, device="cpu", navmesh=navmesh, gaussians=None, seed=0)
+    if hasattr(cfg, "goal_image"):
+        cfg.goal_image = "none"  # goal views are not the step's cost (and need files loaded by the caller)
+    if "episodes" in inspect.signature(make_nav_env).parameters:  # a83eb0b on: episodes and navmesh positional
+        from wanderland_nav.episodes import load_episodes
+
+        env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, seed=0)
+    else:  # be6d50d
+        env = make_nav_env(scene, config=cfg, batch_size=B, device="cpu", navmesh=navmesh, gaussians=None, seed=0)
     env.reset()
     viewmats = AgentCamera(cfg.camera, scene.nav_from_scene, None, None, "cpu").cam_from_world(env._pos, env._yaw)
     return g, viewmats, camera_intrinsics(cfg.camera).expand(B, 3, 3).contiguous()
@@ -78,7 +86,12 @@ def _stage_rows(g, V, K, res, repeat):
         one(g.means), one(cov), one(g.opacities), one(V), one(K), res, res))
     rows["packed: SH colours [M]"], _, pc = t(lambda: spherical_harmonics(
         g.sh_degree, g.means[gid] - campos[cam], g.sh_coeffs[gid]))
-    rows["packed: binning (sorts)"], _, _ = t(lambda: R.isect_packed(cam, pp.means2d, pp.radii, pp.depths, C, ts, T, T))
+    tile_test = ()  # the exact tile test (this branch) is part of the binning
+    if "conics" in inspect.signature(R.isect_packed).parameters:
+        tile_test = (pp.conics, g.opacities[gid])
+    rows["packed: binning (sorts)"], _, (ent, _) = t(lambda: R.isect_packed(cam, pp.means2d, pp.radii, pp.depths, C, ts,
+                                                                             T, T, *tile_test))
+    stats["packed_tile_entries"] = int(ent.numel())
     comp, _, _ = t(lambda: R.rasterize_packed(cam, pp.means2d, pp.conics, pc, g.opacities[gid], pp.radii, pp.depths,
                                               C, res, res, tile_size=ts))
     rows["packed: composite (excl. binning)"] = comp - rows["packed: binning (sorts)"]

@@ -86,8 +86,7 @@ def test_compile_failure_falls_back_to_eager_with_one_warning(monkeypatch):
 
     monkeypatch.setattr(torch, "compile", broken)
     monkeypatch.setattr(compiled_mod, "_warned", False)
-    monkeypatch.setattr(compiled_mod, "project_packed_compiled", CompiledStage(compiled_mod.project_packed))
-    monkeypatch.setattr(compiled_mod, "forward_chunk_compiled", CompiledStage(compiled_mod.forward_chunk))
+    monkeypatch.setattr(compiled_mod, "project_pairs_compiled", CompiledStage(compiled_mod._project_pairs))
     args = random_scene(60, 2, W, H, torch.float32)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

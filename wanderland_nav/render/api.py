@@ -80,7 +80,7 @@ def rasterization(
     tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
     lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
-    packed path's hot stages through torch.compile (`compiled.py`; eager fallback with one warning).
+    packed projection's EWA stage through torch.compile (`compiled.py`; eager fallback with one warning).
     """
     _check_options(packed=packed, compiled=compiled, render_mode=render_mode, rasterize_mode=rasterize_mode,
                    camera_model=camera_model, sparse_grad=sparse_grad, absgrad=absgrad, distributed=distributed,
@@ -209,11 +209,9 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     """Fast path for B scenes x C cameras (means [B,N,3], viewmats [B,C,4,4]): packed projection of the
     shared Gaussians, colours for the visible pairs only, one binning and composite for all B*C cameras."""
     B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
-    project, kernel = project_packed, None
+    project = project_packed
     if compiled:
-        from .compiled import forward_chunk_compiled, project_packed_compiled
-
-        project, kernel = project_packed_compiled, forward_chunk_compiled
+        from .compiled import project_packed_compiled as project
     cam, gid, proj = project(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
                                     near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                                     calc_compensations=rasterize_mode == "antialiased", camera_model=camera_model)
@@ -230,7 +228,7 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
     render_colors, render_alphas = rasterize_packed(
         cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, B * C, width, height,
-        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, kernel=kernel)
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule)
     meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=cam % C,
                  gaussian_ids=gid % N, batch_ids=torch.div(cam, C, rounding_mode="floor"), radii=proj.radii,
                  means2d=proj.means2d, depths=proj.depths, conics=proj.conics, opacities=opac,

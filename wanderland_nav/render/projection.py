@@ -54,6 +54,7 @@ def _intrinsics(Ks: torch.Tensor):
 def _pinhole_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int):
     """means2d `[...,2]` and J `[...,2,3]`; x/z and y/z are clamped to 1.3x the frustum for J only."""
     x, y, z = mc.unbind(-1)
+    z = torch.where(z.abs() > 1e-6, z, torch.full_like(z, 1e-6))  # culled pairs: no NaN leaks into gradients
     fx, fy, cx, cy = _intrinsics(Ks)
     tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
     lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
@@ -98,10 +99,7 @@ def _ortho_jacobian(mc: torch.Tensor, Ks: torch.Tensor):
 def camera_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int, camera_model: str):
     """Camera-frame points `mc [..., 3]` -> (means2d `[..., 2]`, J `[..., 2, 3]`); Ks broadcast as `_intrinsics`."""
     if camera_model == "pinhole":
-        # Keep z away from 0 for the math of culled Gaussians, so no NaN leaks into gradients.
-        z = mc[..., 2]
-        safe_z = torch.where(z.abs() > 1e-6, z, torch.full_like(z, 1e-6))
-        return _pinhole_jacobian(torch.cat([mc[..., :2], safe_z[..., None]], dim=-1), Ks, width, height)
+        return _pinhole_jacobian(mc, Ks, width, height)
     if camera_model == "fisheye":
         return _fisheye_jacobian(mc, Ks)
     return _ortho_jacobian(mc, Ks)

@@ -8,7 +8,9 @@ Semantics (gsplat 1.5, per pixel with centre (x+0.5, y+0.5), Gaussians in increa
 
 How it is fast in pure torch:
 * Tile lists come from two integer radix sorts (Gaussians by the bits of their depth, then pairs by
-  tile id, stable), never a float sort of all pairs.
+  tile id, stable), never a float sort of all pairs. The packed path keeps only the (pair, tile)
+  entries whose quadratic reaches alpha >= 1/255 somewhere on the tile's pixel-centre rectangle
+  (exact minimum, `_touches_tile`): a third of the box entries at the simulator's operating points.
 * -(sigma - log o) is a quadratic form in tile-local pixel coordinates (u, v); it is separable on the
   tile grid, so a chunk of L Gaussians is evaluated for all P pixels of Ta tiles with two full-size
   passes plus one exp. Small CPU tiles (4x4 by default) waste few evaluations on small splats.
@@ -35,6 +37,7 @@ import torch
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.999
 T_EPS = 1e-4
+CACHE_BLOCK = 1 << 15  # entries per block of the elementwise tile test (its temporaries fit in L2)
 DEFAULT_CHUNK_ELEMS = 1 << 17  # floats per [pixels, tiles, gaussians] temporary (512 KiB in float32: about L2)
 
 
@@ -69,10 +72,16 @@ def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor
 
 
 def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, C: int,
-                 tile_size: int, tile_width: int, tile_height: int):
+                 tile_size: int, tile_width: int, tile_height: int, conics: torch.Tensor | None = None,
+                 opacities: torch.Tensor | None = None):
     """Tile lists of V visible (camera, Gaussian) pairs: cam [V] camera ids, means2d [V,2], radii [V,2] > 0,
     depths [V]. Returns ent [M] (indices into the V pairs, grouped by tile id c*TH*TW + ty*TW + tx,
-    depth-ascending within a tile) and counts [C*TH*TW] (int64)."""
+    depth-ascending within a tile) and counts [C*TH*TW] (int64).
+
+    With conics [V,3] and opacities [V], (pair, tile) entries whose alpha is below 1/255 at every
+    pixel centre of the tile are dropped (`_touches_tile`): they are skipped by the composite anyway,
+    so the image and gradients are unchanged, but they are a third of the box-test entries at the
+    env's operating point and cost sorting and compositing work."""
     dev = depths.device
     num_tiles = C * tile_height * tile_width
     V = depths.numel()
@@ -93,20 +102,80 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         order = torch.sort(_sortable_int(depths.detach()), stable=True).indices
         cnt_o = cnt.index_select(0, order)
         first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
-        wx_o = wx.index_select(0, order)
-        M = int(cnt_o.sum())
-        src = torch.repeat_interleave(torch.arange(V, device=dev), cnt_o, output_size=M)  # [M] depth-order slot
-        k = torch.arange(M, device=dev) - (torch.cumsum(cnt_o, 0) - cnt_o).index_select(0, src)
-        wg = wx_o.index_select(0, src)
-        dy = torch.div(k, wg, rounding_mode="floor")
-        tile = first_tile.index_select(0, src) + dy * tile_width + (k - dy * wg)
-        if num_tiles < 2**31:  # narrower keys: the sort of all tile entries is the binning's largest cost
-            tile = tile.to(torch.int32)
+        rows = None
+        if conics is not None:
+            rows = _tile_test_rows(m, x0, y0, conics, opacities, tile_size).index_select(0, order).t().contiguous()
+        tile, src = _expand_to_tiles(cnt_o, wx.index_select(0, order), first_tile, rows, tile_width, tile_size)
+        # narrower keys: the stable sort of all tile entries is the binning's largest cost
+        key_dtype = torch.int16 if num_tiles < 2**15 else torch.int32 if num_tiles < 2**31 else torch.int64
+        tile = tile.to(key_dtype)
         tile, perm = torch.sort(tile, stable=True)
         ent = order.index_select(0, src.index_select(0, perm))
-        counts = torch.bincount(tile, minlength=num_tiles)
+        counts = torch.bincount(tile.to(torch.int32), minlength=num_tiles)
     return ent, counts
 
+
+def _expand_to_tiles(cnt: torch.Tensor, wx: torch.Tensor, first_tile: torch.Tensor, rows: torch.Tensor | None,
+                     tile_width: int, tile_size: int):
+    """(tile ids [M], pair slots [M]) of every (pair, tile) entry, pairs in the given (depth) order.
+
+    cnt [V] tiles of each pair's box, wx [V] its width in tiles, first_tile [V] its top-left tile id;
+    rows [8, V] (`_tile_test_rows`) or None: with them, entries that fail `_touches_tile` are dropped.
+    Works in blocks of about CACHE_BLOCK entries (whole pairs) so every [block] temporary stays in L2;
+    nothing of size M but the two outputs is ever allocated.
+    """
+    dev = cnt.device
+    ends = torch.cumsum(cnt, 0)
+    M = int(ends[-1]) if len(ends) else 0
+    if M == 0:
+        return torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(0, dtype=torch.long, device=dev)
+    cuts = torch.searchsorted(ends, torch.arange(CACHE_BLOCK, max(M, CACHE_BLOCK), CACHE_BLOCK, device=dev), right=True)
+    bounds = [0] + sorted(set(cuts.tolist()) - {0, len(cnt)}) + [len(cnt)]
+    tiles, slots = [], []
+    for g0, g1 in zip(bounds[:-1], bounds[1:]):
+        c = cnt[g0:g1]
+        local = torch.repeat_interleave(torch.arange(g1 - g0, device=dev), c)  # [Mb] pair within the block
+        k = torch.arange(local.numel(), device=dev) - (torch.cumsum(c, 0) - c).index_select(0, local)
+        w = wx[g0:g1].index_select(0, local)
+        dy = torch.div(k, w, rounding_mode="floor")
+        dx = k - dy * w  # tile offsets inside the pair's box
+        if rows is not None:
+            hit = _touches_tile(rows[:, g0:g1].index_select(1, local), dx, dy, tile_size).nonzero().squeeze(1)
+            local, dx, dy = local.index_select(0, hit), dx.index_select(0, hit), dy.index_select(0, hit)
+        tiles.append(first_tile[g0:g1].index_select(0, local) + dy * tile_width + dx)
+        slots.append(local + g0)
+    return torch.cat(tiles), torch.cat(slots)
+
+
+def _tile_test_rows(means2d, x0, y0, conics, opacities, tile_size: int) -> torch.Tensor:
+    """Per-Gaussian constants of `_touches_tile`, [V, 8]: the first box tile's first pixel centre minus
+    the mean (ox, oy), a/2, c/2, b, -b/c, -b/a and log(255 o) + 1e-3 (a 1e-3 margin in log space, so
+    float rounding never drops an entry that the composite would keep)."""
+    a, b, c = conics.detach().unbind(1)
+    ox = x0.to(a.dtype) * tile_size + 0.5 - means2d[:, 0]
+    oy = y0.to(a.dtype) * tile_size + 0.5 - means2d[:, 1]
+    return torch.stack([ox, oy, 0.5 * a, 0.5 * c, b, -b / c, -b / a,
+                        torch.log(opacities.detach() * 255.0) + 1e-3], 1)
+
+
+def _touches_tile(rows: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, tile_size: int) -> torch.Tensor:
+    """[M] bool: may the Gaussian reach alpha >= 1/255 at some pixel centre of its box tile (dx, dy)?
+
+    rows [8, M] from `_tile_test_rows`. Exact minimum of sigma(d) = 0.5 (a dx^2 + c dy^2) + b dx dy
+    over the rectangle spanned by the tile's pixel centres (d = pixel - mean): for a positive definite
+    quadratic whose minimum (d = 0) lies outside the box, the box minimum lies on the edge x = ex or
+    y = ey, with (ex, ey) the point of the box's x and y ranges nearest 0 (at the optimum of an edge
+    x = const the x-derivative has the sign of x); alpha >= 1/255 needs sigma <= log(255 o).
+    """
+    ox, oy, ha, hc, b, nb_c, nb_a, limit = rows.unbind(0)
+    X0, Y0 = ox + dx * tile_size, oy + dy * tile_size
+    X1, Y1 = X0 + (tile_size - 1), Y0 + (tile_size - 1)
+    ex = torch.maximum(X0, X1.clamp(max=0.0))
+    ey = torch.maximum(Y0, Y1.clamp(max=0.0))
+    sigma = lambda u, v: ha * u * u + hc * v * v + b * u * v  # noqa: E731
+    on_x = sigma(ex, torch.minimum(torch.maximum(nb_c * ex, Y0), Y1))  # best point of the edge x = ex
+    on_y = sigma(torch.minimum(torch.maximum(nb_a * ey, X0), X1), ey)  # best point of the edge y = ey
+    return torch.minimum(on_x, on_y) <= limit
 
 # --------------------------------------------------------------------------------------------
 # Chunk kernels (shared by forward and backward). Layout: pixels first, [P, Ta, L], so that the
@@ -169,17 +238,37 @@ def _alpha_from_coefs(q: torch.Tensor, coords: torch.Tensor, coords2: torch.Tens
 
 
 def forward_chunk(rows, center, valid, T_in, coords, coords2, uv, threshold: float, check_termination: bool):
-    """One chunk of the forward composite: (contribution [Ta, P, D+1] = sum_j w_j [c_j, 1], T_out [P, Ta]).
+    """One chunk of the forward composite: (contribution [Ta, P, D+1] = sum_j w_j [c_j, 1], T_out [Ta, P]).
 
-    rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [P, Ta]. The hot stage of the renderer:
-    `compiled.py` hands exactly this function to torch.compile (there `check_termination=False`, the
-    data-dependent early-out that would break the graph; masking always gives the same result).
+    rows [Ta, L, 7+D], center [Ta, 2], valid [Ta, L], T_in [Ta, P]. Tile-major layout [Ta, P, L]:
+    the transmittance scan runs along the contiguous last dim and the colour sum is a plain bmm with
+    no transposed copy (the backward keeps its pixel-major layout for its K=P GEMM). The hot stage of
+    the renderer; `check_termination=False` (GPU schedule) skips the data-dependent early-out, which
+    a host sync would cost; masking always gives the same result. (torch.compile of this function
+    was measured slower than eager: see `compiled.py`.)
     """
-    q, _, _ = _quad_coefs(rows, center, valid)
-    alpha = _alpha_from_coefs(q, coords, coords2, uv).clamp_(max=ALPHA_MAX)
-    alpha = torch.nn.functional.threshold(alpha, threshold, 0.0)
-    nT, w = _transmittance(alpha, T_in, check_termination=check_termination)
-    return torch.bmm(w.permute(1, 0, 2), rows[..., 6:]), nT[:, :, -1]
+    Ta, L, _ = rows.shape
+    q, _, _ = _quad_coefs(rows, center, valid)  # [6, Ta, L]
+    c, c2 = coords[None, :, None], coords2[None, :, None]  # [1, ts, 1]
+    X = torch.addcmul(torch.addcmul(q[5][:, None], c, q[3][:, None]), c2, q[0][:, None])  # [Ta, ts(u), L]
+    Y = torch.addcmul(c * q[4][:, None], c2, q[1][:, None])  # [Ta, ts(v), L]
+    s = torch.add(Y[:, :, None, :], X[:, None, :, :])  # [Ta, v, u, L]
+    s = s.addcmul_(uv[None, :, :, None], q[2][:, None, None, :]).view(Ta, -1, L)  # [Ta, P, L]
+    alpha = s.clamp_(min=-30.0).exp_().clamp_(max=ALPHA_MAX)  # clamp at -30: no denormals (see _alpha_raw)
+    alpha = torch.nn.functional.threshold_(alpha, threshold, 0.0)
+    nT = torch.rsub(alpha, 1.0)
+    nT[:, :, 0].mul_(T_in)
+    nT.cumprod_(dim=-1)  # transmittance after each entry
+    w = alpha
+    w[:, :, 0].mul_(T_in)
+    w[:, :, 1:].mul_(nT[:, :, :-1])  # w_j = alpha_j T_j
+    # gsplat: a pixel stops at the first entry whose next_T <= 1e-4 (that one excluded): nT is
+    # non-increasing, so the excluded entries are exactly nT <= 1e-4 (bool masks: no float copies).
+    if not check_termination or bool(((nT[:, :, -1] <= T_EPS) & (T_in > 0)).any()):
+        done = nT <= T_EPS
+        nT.masked_fill_(done, 0.0)
+        w.masked_fill_(done, 0.0)
+    return torch.bmm(w, rows[..., 6:]), nT[:, :, -1]
 
 
 def _transmittance(alpha: torch.Tensor, T_in: torch.Tensor, check_termination: bool):
@@ -261,12 +350,13 @@ class _Cursor:
         valid = j < self.ends[:, None]
         return L, j.clamp_(max=self.n_entries - 1), valid
 
-    def advance(self, L: int, T: torch.Tensor):
-        """Consume L entries; returns (kept, gone) device index tensors when the active set shrinks."""
+    def advance(self, L: int, alive: torch.Tensor):
+        """Consume L entries (alive [Ta] bool: some pixel of the tile still transmits); returns
+        (kept, gone) device index tensors when the active set shrinks."""
         self.consumed += L
         if not self.compact:
             return None, None
-        keep = (self.counts_h > self.consumed) & (T > 0).any(0).cpu().numpy()
+        keep = (self.counts_h > self.consumed) & alive.cpu().numpy()
         if keep.all():
             return None, None
         kept = torch.as_tensor(np.nonzero(keep)[0], device=self.device)
@@ -329,7 +419,7 @@ class _RasterizeFn(torch.autograd.Function):
     """acc [C,H,W,D+1] = sum_j w_j [c_j, 1] from visible-Gaussian rows; see module docstring."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact, kernel):
+    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
         V, D = colors.shape
@@ -343,21 +433,18 @@ class _RasterizeFn(torch.autograd.Function):
         for tiles_h in plan.groups:
             tiles = torch.as_tensor(tiles_h, device=dev)
             center = geo.centers(tiles)
-            T = geo.in_image(tiles)  # [P, Ta]
+            T = geo.in_image(tiles).t().contiguous()  # [Ta, P]
             acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)  # [Ta, P, D+1]
             cur = _Cursor(plan, tiles_h, dev, compact=on_cpu)
             while cur.more():
                 L, j, valid = cur.next_chunk()
                 rows = table.index_select(0, ent.index_select(0, j.view(-1))).view(cur.active, L, K)
-                if kernel is None:
-                    contrib, T = forward_chunk(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
-                else:
-                    contrib, T = kernel(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, False)
+                contrib, T = forward_chunk(rows, center, valid, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
                 acc += contrib
-                kept, gone = cur.advance(L, T)
+                kept, gone = cur.advance(L, (T > 0).any(1))
                 if kept is not None:
                     out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
-                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(1, kept)
+                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(0, kept)
             if cur.active:
                 out.index_copy_(0, tiles, acc)
         img = geo.to_image(out)
@@ -426,7 +513,7 @@ class _RasterizeFn(torch.autograd.Function):
                 upd.mul_(valid)
                 g_rows.index_add_(1, e, upd.view(K, Ta * L))
                 T = nT[:, :, -1]
-                kept, _ = cur.advance(L, T)
+                kept, _ = cur.advance(L, (T > 0).any(0))
                 if kept is not None:
                     center, gt = center[kept], gt[kept]
                     T, rest0 = T.index_select(1, kept), rest0.index_select(1, kept)
@@ -478,23 +565,19 @@ def rasterize_packed(
     tile_size: int = 16,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
-    kernel=None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair).
-
-    kernel: a drop-in for `forward_chunk` (the torch.compile'd one from `compiled.py`); None: eager."""
+    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair)."""
     TW, TH = -(-width // tile_size), -(-height // tile_size)
-    ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH)
+    ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH, conics, opacities)
     return _composite(means2d, conics, opacities, colors.to(means2d.dtype), ent, counts, C, width, height,
-                      tile_size, chunk_elems, schedule, kernel)
+                      tile_size, chunk_elems, schedule)
 
 
-def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule,
-               kernel=None):
+def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule):
     if schedule not in ("auto", "compact", "masked"):
         raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
     compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     D = colors.shape[-1]
     acc = _RasterizeFn.apply(means2d, conics, opacities, colors, ent, counts, C, height, width, tile_size,
-                             chunk_elems, compact, kernel)
+                             chunk_elems, compact)
     return acc[..., :D], acc[..., D:]
