@@ -43,7 +43,12 @@ class SceneSetSettings:
     split: Optional[str] = None  # manifest split kept (null: all)
     num_active: Optional[int] = None  # scenes stepped at once (null: most that split train_env.batch_size evenly)
     memory_budget_gb: Optional[float] = None  # LRU budget for loaded scenes per env (null: keep all)
-    prepare_workers: int = 2  # parallel scene preparation (process pool)
+    prepare_workers: int = 2  # scenes prepared in parallel
+    backend: str = "process"  # process (local pool) | ray (Ray tasks; RAY_ADDRESS joins a cluster) | auto | serial
+
+    def __post_init__(self):
+        if self.backend not in ("process", "ray", "auto", "serial"):
+            raise ValueError(f"scene.set.backend={self.backend!r}: expected process, ray, auto or serial")
 
 
 @dataclass
@@ -205,6 +210,7 @@ class PrepareConfig:
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
     force: bool = False
     navmesh_enabled: bool = True
+    workers: Optional[int] = None  # a scene set: scenes prepared at once (null: scene.set.prepare_workers)
 
 
 @dataclass
