@@ -111,6 +111,7 @@ class CollectorGroup:
     address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
     cpus_per_worker: float = 1.0  # ray
     memory_per_worker_gb: Optional[float] = None  # ray
+    sync_timeout_s: float = 600.0  # ray: how long the weight sync waits for a worker to join (TorchRL: 60 s)
 
     def __post_init__(self):
         if self.kind not in ("local", "ray"):
@@ -121,7 +122,7 @@ class CollectorGroup:
         if self.kind != "ray":
             return None
         return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
-                "memory_per_worker_gb": self.memory_per_worker_gb}
+                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s}
 
 
 @dataclass
