@@ -43,7 +43,7 @@ def test_train_recipe_over_a_set_steps_and_clones_every_scene(linked_set, tmp_pa
     assert isinstance(recipe.eval_env, SceneSetEvaluation) and recipe.eval_env.scene_ids == ["a", "b"]
     assert sorted(recipe.identity["scene"]["scenes"]) == ["a", "b"]
     assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None,
-                            "sync_timeout_s": 600.0}
+                            "sync_timeout_s": 600.0, "worker_niceness": 0}
     train_env = recipe.env_fn()
     assert isinstance(train_env, MultiSceneNavEnv) and tuple(train_env.batch_size) == (2,)
     assert train_env.num_active == 2  # batch 2 over 2 scenes: one agent each

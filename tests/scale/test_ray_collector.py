@@ -22,7 +22,7 @@ def test_ray_options_come_from_the_collector_group():
 
     assert options("single") is None and options("multi") is None
     assert options("ray") == {"address": None, "cpus_per_worker": 1, "memory_per_worker_gb": None,
-                             "sync_timeout_s": 600.0}
+                             "sync_timeout_s": 600.0, "worker_niceness": 0}
     with pytest.raises(ValueError, match="collector.kind='slurm': expected local or ray"):
         CollectorGroup(kind="slurm")
 
@@ -81,6 +81,34 @@ def test_weight_sync_timeout_reaches_every_process_holding_the_scheme():
         assert torchrl_ray._DIST_TIMEOUT == timedelta(seconds=900)
     finally:
         torchrl_ray._DIST_TIMEOUT = default
+
+
+def test_ray_init_sets_worker_niceness_and_seeds_each_worker(monkeypatch):
+    pytest.importorskip("ray")
+    import torchrl.collectors.distributed as distributed
+
+    from wanderland_nav.rl.ray_collector import PatientRayWeightSync, SeededEnvFn, make_ray_collector
+
+    made = {}
+
+    class Recorder:
+        def __init__(self, env_fns, policy, **kw):
+            made.update(env_fns=env_fns, **kw)
+
+        def set_seed(self, seed):
+            made["seed"] = seed
+
+    monkeypatch.setattr(distributed, "RayCollector", Recorder)
+    make_ray_collector(lambda: None, None, frames_per_batch=8, total_frames=8, num_workers=2, seed=5,
+                       sync_timeout_s=120)
+    assert made["ray_init_config"]["runtime_env"] == {"env_vars": {"RAY_worker_niceness": "0"}}
+    assert [(f.seed, f.worker) for f in made["env_fns"]] == [(5, 0), (5, 1)]
+    assert all(isinstance(f, SeededEnvFn) for f in made["env_fns"]) and made["seed"] == 5
+    assert made["weight_sync_schemes"]["policy"].timeout_s == 120.0
+    assert isinstance(made["weight_sync_schemes"]["policy"], PatientRayWeightSync)
+    made.clear()
+    make_ray_collector(lambda: None, None, frames_per_batch=8, total_frames=8, num_workers=2, worker_niceness=None)
+    assert "runtime_env" not in made["ray_init_config"]  # Ray's own niceness
 
 
 def _first_batch(seed):

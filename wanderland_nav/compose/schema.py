@@ -112,6 +112,7 @@ class CollectorGroup:
     cpus_per_worker: float = 1.0  # ray
     memory_per_worker_gb: Optional[float] = None  # ray
     sync_timeout_s: float = 600.0  # ray: how long the weight sync waits for a worker to join (TorchRL: 60 s)
+    worker_niceness: Optional[int] = 0  # ray: collector processes' niceness (null: Ray's own, 15)
 
     def __post_init__(self):
         if self.kind not in ("local", "ray"):
@@ -122,7 +123,8 @@ class CollectorGroup:
         if self.kind != "ray":
             return None
         return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
-                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s}
+                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s,
+                "worker_niceness": self.worker_niceness}
 
 
 @dataclass

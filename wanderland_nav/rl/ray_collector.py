@@ -6,7 +6,12 @@ started with `ray start --head` (then `collector.address=auto`, or `host:6379` f
 Each remote collector builds its own env from `env_fn` (its own scenes for a multi-scene env) and
 collects `frames_per_batch / num_workers` frames per batch; the batches are concatenated for the learner.
 
-Two things on top of TorchRL's defaults:
+Three things on top of TorchRL's and Ray's defaults:
+  * Worker niceness `worker_niceness` (default 0): Ray renices every worker process to 15 so that the
+    driver keeps priority; here the driver (the learner) waits while the workers collect, and on a shared
+    machine nice-15 collectors starve behind everyone else's nice-0 processes (seen: 2 collectors still
+    building their envs after 18 minutes at load 25). Set through the job's runtime env
+    (`RAY_worker_niceness`), so it also holds on a cluster joined with `address=auto`.
   * Weight sync waits `sync_timeout_s` (default 600 s) for the workers: TorchRL 0.14's Ray weight sync
     (Gloo over a TCPStore) hard-codes a 60 s rendezvous (`torchrl.weight_update._ray._DIST_TIMEOUT`), and
     on a loaded machine a worker that is still importing torch misses it (`DistStoreError: wait timeout
@@ -59,7 +64,8 @@ class SeededEnvFn:
 
 def make_ray_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: int, total_frames: int,
                        num_workers: int = 2, seed: int = 0, address: str | None = None, cpus_per_worker: float = 1,
-                       memory_per_worker_gb: float | None = None, sync_timeout_s: float = 600.0):
+                       memory_per_worker_gb: float | None = None, sync_timeout_s: float = 600.0,
+                       worker_niceness: int | None = 0):
     """A synchronous `RayCollector` of `num_workers` single-process collectors; joins `address` or starts
     a local Ray instance with `num_workers * cpus_per_worker` CPUs."""
     try:
@@ -73,6 +79,8 @@ def make_ray_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch
     init = {"address": address, "ignore_reinit_error": True, "include_dashboard": False, "log_to_driver": False}
     if address is None:
         init["num_cpus"] = max(1, int(num_workers * cpus_per_worker))
+    if worker_niceness is not None:  # None: Ray's own (15)
+        init["runtime_env"] = {"env_vars": {"RAY_worker_niceness": str(int(worker_niceness))}}
     remote = {"num_cpus": cpus_per_worker}
     if memory_per_worker_gb:
         remote["memory"] = int(memory_per_worker_gb * 1024**3)
