@@ -4,6 +4,11 @@
 folder whose sub-folders are scenes, or a list of those (`scene=[a,b]`). Several scenes run in parallel
 processes, each with its own progress bar; at the end a summary per scene (kept, rejection reasons,
 length histogram). Per scene: `episodes.json`, `goal_images/*.png` and `episodes_topdown.png`.
+
+A scene set (`scene=demo_set`, or any `scene.set`: a manifest) runs through the set's resumable jobs
+(`compose.scene_sets.run_set_jobs`): each scene is prepared with the composed `navigation` settings and
+gets `episodes.json` beside it (no top-down picture); scenes done with the same settings are skipped,
+failures are listed at the end and the exit status is 1.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose import scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import process_scene, resolve_scenes
+from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import MakeEpisodesConfig
 
 
@@ -32,6 +38,12 @@ def _worker(args):
 def run(cfg: DictConfig):
     """Everything `main` does, callable without Hydra's runtime (tests compose the config)."""
     c: MakeEpisodesConfig = typed_config(cfg, MakeEpisodesConfig)
+    if c.scene.set:
+        if c.scenes or c.out is not None:
+            raise ValueError(f"scene={c.scene.name} is a scene set: its episodes go beside each scene; "
+                             "give no scene list and no out=")
+        return run_set_jobs(c.scene, c.navigation, generator=c.generator, num_episodes=c.num_episodes, seed=c.seed,
+                            force=c.force, workers=c.workers)
     plans = resolve_scenes(c)
     kw = dict(navigation=c.navigation, num_episodes=c.num_episodes, seed=c.seed, settings=c.generator, force=c.force,
               topdown=c.topdown, progress=c.progress)
@@ -49,7 +61,8 @@ def run(cfg: DictConfig):
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="make_episodes")
 def main(cfg: DictConfig) -> None:
-    run(cfg)
+    if getattr(run(cfg), "failed", None):
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
-"""`python -m wanderland_nav.prepare [scene=demo | scene=<folder>]`: make (demo) + prepare a scene, print a summary.
+"""`python -m wanderland_nav.prepare [scene=demo | scene=<folder> | scene=<set>]`: make (demo) + prepare scenes.
 
-Collision mesh and navmesh settings come from `conf/navigation/` (the group train, evaluate and expert
-compose too); steps whose outputs are up to date are skipped (`scene_preparation`).
+Collision mesh and navmesh settings come from `conf/navigation/` (the group train, evaluate and
+make_episodes compose too); steps whose outputs are up to date are skipped (`scene_preparation`).
+A scene set (`scene=demo_set`, or any `scene.set`) is prepared scene by scene in parallel and resumably
+(`compose.scene_sets.run_set_jobs`): failed scenes are listed at the end and the exit status is 1.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import hydra
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import PrepareConfig
 
 
@@ -20,10 +23,15 @@ def _took(side: dict) -> str:
     return "cached" if side.get("skipped") else f"{side['timings']['total_s']:.1f}s"
 
 
-def run(cfg: DictConfig) -> dict:
-    """Everything `main` does (tests call it with a composed config). Returns the preparation report."""
+def run(cfg: DictConfig):
+    """Everything `main` does (tests call it with a composed config). Returns the preparation report
+    (a scene set: the `prepare_set.BatchReport`)."""
     t0 = time.perf_counter()
     c: PrepareConfig = typed_config(cfg, PrepareConfig)
+    if c.scene.set:
+        if not c.navmesh_enabled:
+            raise ValueError("navmesh_enabled=false: a scene set is always prepared with its navmesh")
+        return run_set_jobs(c.scene, c.navigation, generator=None, force=c.force, workers=c.workers)
     scene = prepared_scene(c.scene, c.navigation, force=c.force, bake_navmesh=c.navmesh_enabled, prepare=True)
     rep = scene.meta["prepare"]
     cm = rep["collision_mesh"]
@@ -51,7 +59,8 @@ def run(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="prepare")
 def main(cfg: DictConfig) -> None:
-    run(cfg)
+    if getattr(run(cfg), "failed", None):
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
-"""Prepare + expert over a scene set in parallel, resumably: `python -m wanderland_nav.prepare_set <set>`.
+"""Prepare + expert episodes over a scene set in parallel, resumably (the library under `prepare scene=<set>`,
+`make_episodes scene=<set>`, and the preparation `train` / `evaluate` run before a set).
 
 Each scene is one task: build it if it is a demo seed, `prepare_scene` (collision mesh, navmesh) and
-`write_scene_episodes` (expert episodes). Tasks run as Ray tasks when `ray` is importable and a cluster
+`write_scene_episodes` (expert episodes, when the job has generator settings). Tasks run as Ray tasks when `ray` is importable and a cluster
 is reachable or startable (`backend="ray"`), else in a local `ProcessPoolExecutor` (`"process"`), or in
 this process (`"serial"`, for debugging). Why not a home-made scheduler: Ray already places tasks over
 machines; the local pool covers one machine without it.
@@ -13,7 +14,6 @@ does not stop the others: its error is recorded under `failed` and reported at t
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import logging
@@ -26,8 +26,9 @@ from typing import Callable
 
 from planners import NavMeshSettings
 from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.scene.collision import CollisionSettings
-from wanderland_nav.scene.sets import SceneSet, demo_scene_set, load_scene_set
+from wanderland_nav.scene.sets import SceneSet
 
 log = logging.getLogger(__name__)
 MANIFEST_FORMAT = 1
@@ -43,14 +44,18 @@ class SceneJob:
     seed: int = 0
     demo_seed: int | None = None  # a procedural demo scene to build first
     demo_preset: str = "tiny"
-    expert: bool = True
-    goal_images: bool = True  # rendered goal views (seconds each on a CPU); point-goal training needs none
+    generator: GeneratorSettings | None = GeneratorSettings()  # expert episodes with these; None: prepare only
     collision: CollisionSettings = CollisionSettings()  # the composed `navigation` group's settings
     navmesh: NavMeshSettings | None = None  # null: NavMeshSettings() (up axis: the scene's)
+    force: bool = False  # redo (and rewrite) even when the done-manifest or the artefacts' hashes say done
+
+    @property
+    def expert(self) -> bool:
+        return self.generator is not None
 
     def settings_hash(self) -> str:
         """Every setting of the job: a scene done with the same hash is skipped."""
-        return _digest({k: v for k, v in asdict(self).items() if k not in ("scene_id", "path")})
+        return _digest({k: v for k, v in asdict(self).items() if k not in ("scene_id", "path", "force")})
 
     def prepare_hash(self) -> str:
         """The settings of the preparation alone: a prepare-only job (`expert=False`, the scene already
@@ -60,7 +65,7 @@ class SceneJob:
 
     def done_by(self, entry: dict | None) -> bool:
         """Whether a done-manifest entry covers this job."""
-        if entry is None:
+        if entry is None or self.force:
             return False
         return entry.get("settings_hash") == self.settings_hash() or (
             not self.expert and entry.get("prepare_hash") == self.prepare_hash())
@@ -82,15 +87,15 @@ def prepare_one(job: SceneJob) -> dict:
         make_demo_scene(Path(job.path), seed=job.demo_seed, preset=job.demo_preset)
     from wanderland_nav.scene_preparation import prepare_scene
 
-    scene = prepare_scene(job.path, collision=job.collision, navmesh=job.navmesh)
+    scene = prepare_scene(job.path, collision=job.collision, navmesh=job.navmesh, force=job.force)
     out = {"prepare_s": time.perf_counter() - t0}
     if job.expert:
         from planners import NavMesh
-        from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+        from wanderland_nav.episodes.generate import write_scene_episodes
 
         episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
                                                  Path(scene.root) / "episodes.json", num_episodes=job.num_episodes,
-                                                 seed=job.seed, settings=GeneratorSettings(goal_images=job.goal_images))
+                                                 seed=job.seed, settings=job.generator, force=job.force)
         out.update(episodes=len(episodes), expert_skipped=bool(summary.skipped))
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -105,19 +110,23 @@ class BatchReport:
     seconds: float = 0.0
 
     def format(self) -> str:
-        lines = [f"{len(self.done)} scenes done ({len(self.skipped)} from an earlier run), {len(self.failed)} failed, "
-                 f"{self.seconds:.1f}s on {self.backend}"]
+        lines = [f"  {sid}: " + ("done by an earlier run" if sid in self.skipped else f"{d.get('seconds', 0):.1f}s")
+                 + (f", {d['episodes']} episodes" if "episodes" in d else "") for sid, d in self.done.items()]
+        lines.append(f"{len(self.done)} scenes done ({len(self.skipped)} from an earlier run), {len(self.failed)} "
+                     f"failed, {self.seconds:.1f}s on {self.backend}")
         lines += [f"  FAILED {sid}: {err.strip().splitlines()[-1] if err.strip() else err}"
                   for sid, err in self.failed.items()]
         return "\n".join(lines)
 
 
-def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0, expert: bool = True,
-             goal_images: bool = True, collision: CollisionSettings = CollisionSettings(),
-             navmesh: NavMeshSettings | None = None) -> list[SceneJob]:
+def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0,
+             generator: GeneratorSettings | None = GeneratorSettings(),
+             collision: CollisionSettings = CollisionSettings(), navmesh: NavMeshSettings | None = None,
+             force: bool = False) -> list[SceneJob]:
+    """One job per scene of the set (demo seeds are built first); `generator=None`: prepare only."""
     seeds = scene_set.demo.get("seeds") or [None] * len(scene_set)
-    return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), expert,
-                     goal_images, collision, navmesh) for e, s in zip(scene_set.entries, seeds)]
+    return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), generator,
+                     collision, navmesh, force) for e, s in zip(scene_set.entries, seeds)]
 
 
 def _read_manifest(path: Path) -> dict:
@@ -144,8 +153,9 @@ def _pick_backend(backend: str) -> str:
 
 
 def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int = 2, backend: str = "auto",
-              fn: Callable[[SceneJob], dict] = prepare_one) -> BatchReport:
-    """Run `fn` over the jobs not yet done (by `settings_hash`), `workers` at a time; never raises for a scene."""
+              fn: Callable[[SceneJob], dict] | None = None) -> BatchReport:
+    """Run `fn` (default `prepare_one`) over the jobs not yet done (by `settings_hash`), `workers` at a time;
+    never raises for a scene."""
     t0, path = time.perf_counter(), Path(done_manifest)
     manifest = _read_manifest(path)
     report = BatchReport(backend=_pick_backend(backend))
@@ -172,7 +182,7 @@ def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int =
     if runner is None:
         raise ValueError(f"backend must be auto | ray | process | serial, got {backend!r}")
     if todo:
-        runner(todo, fn, max(1, int(workers)), finished)
+        runner(todo, fn or prepare_one, max(1, int(workers)), finished)
     report.seconds = time.perf_counter() - t0
     return report
 
@@ -229,9 +239,10 @@ def prepare_scene_set(scene_set: SceneSet, done_manifest: str | Path, *, num_epi
     (resumably: the done-manifest skips scenes done with the same settings). Like the single-scene entry
     points, a scene's existing `episodes.json` is used as it is, while its collision mesh and navmesh
     are brought up to date with `collision` / `navmesh`. Returns `{scene_id: folder}` of the ready ones."""
-    jobs = [replace(j, expert=False) if (Path(j.path) / "episodes.json").is_file() else j
-            for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed, goal_images=goal_images,
-                              collision=collision, navmesh=navmesh)]
+    jobs = [replace(j, generator=None) if (Path(j.path) / "episodes.json").is_file() else j
+            for j in jobs_for(scene_set, num_episodes=num_episodes, seed=seed,
+                              generator=GeneratorSettings(goal_images=goal_images), collision=collision,
+                              navmesh=navmesh)]
     failed = {}
     if jobs:
         report = run_batch(jobs, done_manifest, workers=workers, backend=backend)
@@ -244,32 +255,3 @@ def prepare_scene_set(scene_set: SceneSet, done_manifest: str | Path, *, num_epi
     if not ready:
         raise RuntimeError(f"{scene_set.source}: no scene of the set could be prepared: {failed}")
     return ready
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", help="manifest (.txt list, .csv, folder of scenes) or 'demo_set'")
-    p.add_argument("--data-root"), p.add_argument("--tiers", nargs="*"), p.add_argument("--split")
-    p.add_argument("--demo-seeds", type=int, nargs="*", default=[0, 1, 2])
-    p.add_argument("--demo-root", default="data/scenes/demo_set")
-    p.add_argument("--episodes", type=int, default=100), p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-expert", action="store_true"), p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--no-goal-images", action="store_true")
-    p.add_argument("--backend", default="auto", choices=["auto", "ray", "process", "serial"])
-    p.add_argument("--manifest", help="done-manifest JSON (default: <set folder>/prepare_done.json)")
-    a = p.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    if a.scenes == "demo_set":
-        s, default_manifest = demo_scene_set(a.demo_root, a.demo_seeds), Path(a.demo_root) / "prepare_done.json"
-    else:
-        s = load_scene_set(a.scenes, data_root=a.data_root, tiers=a.tiers, split=a.split)
-        src = Path(a.scenes)
-        default_manifest = (src if src.is_dir() else src.parent) / f"{src.stem}_prepare_done.json"
-    jobs = jobs_for(s, num_episodes=a.episodes, seed=a.seed, expert=not a.no_expert, goal_images=not a.no_goal_images)
-    report = run_batch(jobs, a.manifest or default_manifest, workers=a.workers, backend=a.backend)
-    print(report.format())
-    return 1 if report.failed else 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

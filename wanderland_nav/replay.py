@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -48,4 +49,7 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    if any(a.startswith("scene=") for a in sys.argv[1:]):  # Hydra's own message names no way out
+        sys.exit("replay takes rollout=<file.npz> or episodes=<episodes.json> [scene_path=<scene folder>], not "
+                 "scene=: a rollout records its own scene (over a scene set, replay one scene's file at a time)")
     main()

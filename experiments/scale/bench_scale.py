@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 1 2 4
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 2 --ray
 
-The scenes are a prepared demo set (`python -m wanderland_nav.prepare_set demo_set --demo-root <dir>`).
+The scenes are a prepared demo set (`python -m wanderland_nav.make_episodes scene=demo_set scene.set.root=<dir>`).
 Collection: the CityWalker-style demo policy (32 px, 10k LOD Gaussians) acting in a MultiSceneNavEnv
 (B=4 agents per worker, 2 scenes active) through `make_collector` (1 worker: `Collector` in-process;
 N > 1: `MultiSyncCollector` of N processes; `--ray`: `RayCollector` of N actors); frames/s is measured

@@ -31,7 +31,7 @@ def set_overrides(root) -> list[str]:
     return ["scene=demo_set", "scene.set.seeds=null", f"scene.set.manifest={root}", f"scene.set.root={root}"]
 
 
-def test_train_recipe_over_a_set_steps_every_scene_and_clones_on_the_first(linked_set, tmp_path):
+def test_train_recipe_over_a_set_steps_and_clones_every_scene(linked_set, tmp_path):
     from wanderland_nav.compose.training import training_recipe
     from wanderland_nav.envs.multi_scene import MultiSceneNavEnv
     from wanderland_nav.rl.scene_sets import SceneSetEvaluation
@@ -42,13 +42,15 @@ def test_train_recipe_over_a_set_steps_every_scene_and_clones_on_the_first(linke
     recipe, scene = training_recipe(c, {"seed": 0}, evaluate=None)
     assert isinstance(recipe.eval_env, SceneSetEvaluation) and recipe.eval_env.scene_ids == ["a", "b"]
     assert sorted(recipe.identity["scene"]["scenes"]) == ["a", "b"]
-    assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None}
+    assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None,
+                            "sync_timeout_s": 600.0, "worker_niceness": 0}
     train_env = recipe.env_fn()
     assert isinstance(train_env, MultiSceneNavEnv) and tuple(train_env.batch_size) == (2,)
     assert train_env.num_active == 2  # batch 2 over 2 scenes: one agent each
     train_env.close()
     bc_env = recipe.bc_env_fn()
-    assert str(bc_env.scene.root).endswith("set/a") and tuple(bc_env.batch_size) == (2,)
+    assert isinstance(bc_env, MultiSceneNavEnv) and tuple(bc_env.batch_size) == (2,)
+    assert list(bc_env.scene_episodes) == ["a", "b"]  # BC labels come from every scene's expert paths
     bc_env.close()
     recipe.logger.close()
 

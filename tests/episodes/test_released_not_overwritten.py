@@ -42,9 +42,9 @@ def test_released_episodes_are_left_untouched_unless_forced(demo, tmp_path, capl
         eps, summary = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
     side = tmp_path / "episodes.generated.json"
     assert out.read_bytes() == before, "the released file must not change"
-    assert summary.out == str(side) and json.loads(side.read_text())["generator"]["name"] == "wanderland_nav.expert"
+    assert summary.out == str(side) and json.loads(side.read_text())["generator"]["name"] == "wanderland_nav.make_episodes"
     text = caplog.text
-    assert f"{out} was not written by wanderland_nav.expert" in text and f"episodes written to {side}" in text
+    assert f"{out} was not written by wanderland_nav.make_episodes" in text and f"episodes written to {side}" in text
     assert f"wrote {side}" in summary.format()
     # a rerun finds its own sibling up to date (and still leaves the released file alone)
     _, again = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
@@ -72,3 +72,21 @@ def test_make_episodes_entry_point_force_reaches_the_library(prepared_demo_scene
     cfg.force = True
     (s,) = run(cfg)
     assert s.out == str(out) and "generator" in json.loads(out.read_text())
+
+
+def test_files_written_under_the_old_generator_name_are_still_ours(demo, tmp_path):
+    from wanderland_nav.episodes.generate import written_by_us
+
+    scene, nm = demo
+    out = tmp_path / "episodes.json"
+    write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
+    data = json.loads(out.read_text())
+    assert data["generator"]["name"] == "wanderland_nav.make_episodes"
+    data["generator"]["name"] = "wanderland_nav.expert"  # what files of earlier versions say
+    out.write_text(json.dumps(data))
+    assert written_by_us(out)
+    _, again = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
+    assert again.skipped and again.out == str(out)  # up to date in place, not a sibling file
+    data["generator"]["name"] = "someone_else"
+    out.write_text(json.dumps(data))
+    assert not written_by_us(out)

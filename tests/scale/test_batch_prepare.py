@@ -50,7 +50,7 @@ def test_a_prepare_only_job_is_covered_by_an_earlier_full_job_with_the_same_prep
 
     manifest = tmp_path / "done.json"
     run_batch(jobs(tmp_path, ["s1"]), manifest, backend="serial", fn=fake_work)
-    prepare_only = [replace(j, expert=False) for j in jobs(tmp_path, ["s1"])]
+    prepare_only = [replace(j, generator=None) for j in jobs(tmp_path, ["s1"])]
     assert run_batch(prepare_only, manifest, backend="serial", fn=fake_work).skipped == ["s1"]
     coarser = [replace(j, collision=CollisionSettings(voxel_size=0.5)) for j in prepare_only]
     assert run_batch(coarser, manifest, backend="serial", fn=fake_work).skipped == []  # other preparation: redone

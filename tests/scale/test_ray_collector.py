@@ -21,7 +21,8 @@ def test_ray_options_come_from_the_collector_group():
         return typed_config(OmegaConf.load(f"conf/collector/{name}.yaml"), CollectorGroup).ray_options()
 
     assert options("single") is None and options("multi") is None
-    assert options("ray") == {"address": None, "cpus_per_worker": 1, "memory_per_worker_gb": None}
+    assert options("ray") == {"address": None, "cpus_per_worker": 1, "memory_per_worker_gb": None,
+                             "sync_timeout_s": 600.0, "worker_niceness": 0}
     with pytest.raises(ValueError, match="collector.kind='slurm': expected local or ray"):
         CollectorGroup(kind="slurm")
 
@@ -60,3 +61,87 @@ def test_two_ray_workers_run_ppo_iterations(tmp_path):
     assert [s for s, _ in log.rows] == [32, 64, 96]  # 3 iterations of 2 x 16 frames
     assert all(torch.isfinite(torch.tensor(r["losses/critic"])) for _, r in log.rows)
     assert any(not torch.equal(a, b) for a, b in zip(before, policy.parameters()))
+
+
+def test_weight_sync_timeout_reaches_every_process_holding_the_scheme():
+    pytest.importorskip("ray")
+    import pickle
+    from datetime import timedelta
+
+    from torchrl.weight_update import _ray as torchrl_ray
+
+    from wanderland_nav.rl.ray_collector import PatientRayWeightSync
+
+    default = torchrl_ray._DIST_TIMEOUT
+    try:
+        scheme = PatientRayWeightSync(900)
+        assert torchrl_ray._DIST_TIMEOUT == timedelta(seconds=900)  # the learner's side
+        torchrl_ray._DIST_TIMEOUT = default  # a fresh worker process
+        pickle.loads(pickle.dumps(scheme))  # the scheme arriving in a worker
+        assert torchrl_ray._DIST_TIMEOUT == timedelta(seconds=900)
+    finally:
+        torchrl_ray._DIST_TIMEOUT = default
+
+
+def test_ray_init_sets_worker_niceness_and_seeds_each_worker(monkeypatch):
+    pytest.importorskip("ray")
+    import torchrl.collectors.distributed as distributed
+
+    from wanderland_nav.rl.ray_collector import PatientRayWeightSync, SeededEnvFn, make_ray_collector
+
+    made = {}
+
+    class Recorder:
+        def __init__(self, env_fns, policy, **kw):
+            made.update(env_fns=env_fns, **kw)
+
+        def set_seed(self, seed):
+            made["seed"] = seed
+
+    monkeypatch.setattr(distributed, "RayCollector", Recorder)
+    make_ray_collector(lambda: None, None, frames_per_batch=8, total_frames=8, num_workers=2, seed=5,
+                       sync_timeout_s=120)
+    assert made["ray_init_config"]["runtime_env"] == {"env_vars": {"RAY_worker_niceness": "0"}}
+    assert [(f.seed, f.worker) for f in made["env_fns"]] == [(5, 0), (5, 1)]
+    assert all(isinstance(f, SeededEnvFn) for f in made["env_fns"]) and made["seed"] == 5
+    assert made["weight_sync_schemes"]["policy"].timeout_s == 120.0
+    assert isinstance(made["weight_sync_schemes"]["policy"], PatientRayWeightSync)
+    made.clear()
+    make_ray_collector(lambda: None, None, frames_per_batch=8, total_frames=8, num_workers=2, worker_niceness=None)
+    assert "runtime_env" not in made["ray_init_config"]  # Ray's own niceness
+
+
+def _first_batch(seed):
+    """The first batch of a fresh 2-worker local Ray collector."""
+    import ray
+
+    sys.path.insert(0, str(TESTS / "rl"))
+    from fake_env import FakeNavEnv
+    from test_ppo import tiny_policy
+
+    from wanderland_nav.rl.ppo import make_actor
+    from wanderland_nav.rl.ray_collector import make_ray_collector
+
+    path = os.pathsep.join([str(TESTS / "rl"), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
+    try:
+        torch.manual_seed(0)  # the same policy weights every time
+        collector = make_ray_collector(lambda: FakeNavEnv((4,)), make_actor(tiny_policy()), frames_per_batch=32,
+                                       total_frames=32, num_workers=2, seed=seed)
+        batch = next(iter(collector)).clone()
+        collector.shutdown()
+        return batch
+    finally:
+        ray.shutdown()
+
+
+@pytest.mark.slow  # two Ray starts: ~1 min idle, several under load
+def test_ray_first_batch_is_the_same_for_the_same_seed():
+    pytest.importorskip("ray")
+    a, b, other = _first_batch(0), _first_batch(0), _first_batch(1)
+    for key in a.keys(True, True):  # every leaf: observations, actions, log-probs, rewards
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0, msg=f"{key} differs between two runs")
+    assert not torch.equal(a["action"], other["action"])
+    half = a.shape[0] // 2  # worker 0's frames, then worker 1's: two seeds, two different streams
+    assert not torch.equal(a["action"][:half], a["action"][half:])

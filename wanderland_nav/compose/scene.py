@@ -16,7 +16,12 @@ log = logging.getLogger(__name__)
 
 def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
     """Where the scene lives; the demo is made there on first use (idempotent). A non-default demo
-    preset gets its own folder beside the default one (`<path>_<preset>`)."""
+    preset gets its own folder beside the default one (`<path>_<preset>`). A scene set is refused: the
+    commands that take one scene never quietly use a set's first scene."""
+    if scene.set is not None:
+        raise ValueError(f"scene={scene.name} is a scene set; this command takes one scene: pass scene=<folder> "
+                         f"(one of the set's, e.g. scene={scene.path}). prepare, make_episodes, train and evaluate "
+                         "take sets")
     path = Path(scene.path)
     if scene.demo:
         preset = demo_preset or scene.preset

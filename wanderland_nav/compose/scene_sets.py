@@ -1,9 +1,12 @@
-"""Config -> a prepared scene set and its per-scene env factory, for `train` and `evaluate`.
+"""Config -> a prepared scene set and its per-scene env factory, for every entry point that takes `scene=<set>`.
 
-A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes; `ready_scene_set` prepares the ones
-without episodes (in parallel, resumably: `wanderland_nav/prepare_set.py`) with the same `navigation`
-settings every entry point composes, and `scene_env_fn` is the picklable per-scene env factory that
-`rl/scene_sets.py` (multi-scene training, per-scene evaluation) and the collector workers call.
+A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes. `run_set_jobs` is `prepare` and
+`make_episodes` over a set: one job per scene (in parallel, resumably: `wanderland_nav/prepare_set.py`)
+with the same `navigation` settings the single-scene commands compose, so a `navigation.*` override
+reaches every scene and is part of the done-manifest key. `ready_scene_set` prepares the scenes a
+`train` / `evaluate` run needs (episodes made only where there are none), and `scene_env_fn` is the
+picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training, per-scene evaluation)
+and the collector workers call.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussi
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
 from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.prepare_set import prepare_scene_set
+from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.prepare_set import BatchReport, jobs_for, prepare_scene_set, run_batch
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.sets import scene_set_from_config
 
@@ -32,14 +36,33 @@ def set_root(s: SceneSetSettings) -> Path:
     return Path(s.manifest).parent
 
 
+def done_manifest(s: SceneSetSettings) -> Path:
+    """The set's record of finished scenes (`prepare_set.run_batch`), shared by every entry point."""
+    return set_root(s) / "prepare_done.json"
+
+
+def run_set_jobs(scene: SceneGroup, navigation: NavigationGroup, *, generator: GeneratorSettings | None,
+                 num_episodes: int = 0, seed: int = 0, force: bool = False,
+                 workers: int | None = None) -> BatchReport:
+    """`prepare` (`generator=None`) or `make_episodes` over every scene of `scene.set`, `workers` scenes at a
+    time (null: `scene.set.prepare_workers`); never raises for one scene: failures are in the report."""
+    scene_set = scene_set_from_config(scene)
+    jobs = jobs_for(scene_set, num_episodes=num_episodes, seed=seed, generator=generator,
+                    collision=navigation.collision, navmesh=navigation.navmesh, force=force)
+    report = run_batch(jobs, done_manifest(scene.set), workers=workers or scene.set.prepare_workers,
+                       backend=scene.set.backend)
+    print(f"scene set {scene_set.source}:\n{report.format()}", flush=True)
+    return report
+
+
 def ready_scene_set(scene: SceneGroup, navigation: NavigationGroup, *, num_episodes: int, seed: int,
                     goal_images: bool) -> dict[str, str]:
     """`{scene_id: folder}` of the set's scenes that are prepared and have episodes (made when missing);
     scenes that fail are left out and logged by `prepare_scene_set`, an empty set raises."""
     scene_set = scene_set_from_config(scene)
-    paths = prepare_scene_set(scene_set, set_root(scene.set) / "prepare_done.json", num_episodes=num_episodes,
-                              seed=seed, goal_images=goal_images, workers=scene.set.prepare_workers,
-                              collision=navigation.collision, navmesh=navigation.navmesh)
+    paths = prepare_scene_set(scene_set, done_manifest(scene.set), num_episodes=num_episodes, seed=seed,
+                              goal_images=goal_images, workers=scene.set.prepare_workers,
+                              backend=scene.set.backend, collision=navigation.collision, navmesh=navigation.navmesh)
     log.info("scene set %s: %d of %d scenes ready", scene_set.source, len(paths), len(scene_set))
     return paths
 

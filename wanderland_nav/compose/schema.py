@@ -43,7 +43,12 @@ class SceneSetSettings:
     split: Optional[str] = None  # manifest split kept (null: all)
     num_active: Optional[int] = None  # scenes stepped at once (null: most that split train_env.batch_size evenly)
     memory_budget_gb: Optional[float] = None  # LRU budget for loaded scenes per env (null: keep all)
-    prepare_workers: int = 2  # parallel scene preparation (process pool)
+    prepare_workers: int = 2  # scenes prepared in parallel
+    backend: str = "process"  # process (local pool) | ray (Ray tasks; RAY_ADDRESS joins a cluster) | auto | serial
+
+    def __post_init__(self):
+        if self.backend not in ("process", "ray", "auto", "serial"):
+            raise ValueError(f"scene.set.backend={self.backend!r}: expected process, ray, auto or serial")
 
 
 @dataclass
@@ -106,6 +111,8 @@ class CollectorGroup:
     address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
     cpus_per_worker: float = 1.0  # ray
     memory_per_worker_gb: Optional[float] = None  # ray
+    sync_timeout_s: float = 600.0  # ray: how long the weight sync waits for a worker to join (TorchRL: 60 s)
+    worker_niceness: Optional[int] = 0  # ray: collector processes' niceness (null: Ray's own, 15)
 
     def __post_init__(self):
         if self.kind not in ("local", "ray"):
@@ -116,7 +123,8 @@ class CollectorGroup:
         if self.kind != "ray":
             return None
         return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
-                "memory_per_worker_gb": self.memory_per_worker_gb}
+                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s,
+                "worker_niceness": self.worker_niceness}
 
 
 @dataclass
@@ -205,6 +213,7 @@ class PrepareConfig:
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
     force: bool = False
     navmesh_enabled: bool = True
+    workers: Optional[int] = None  # a scene set: scenes prepared at once (null: scene.set.prepare_workers)
 
 
 @dataclass

@@ -70,8 +70,8 @@ def _single_scene(c: TrainConfig):
 
 
 def _scene_set(c: TrainConfig):
-    """`scene.set`: every ready scene for PPO (a `MultiSceneNavEnv`) and per-scene evaluation; BC (DAgger
-    on per-episode expert paths) warm-starts on the set's first scene only, and says so."""
+    """`scene.set`: every ready scene for BC and PPO (a `MultiSceneNavEnv` each; BC's with global episode
+    indices for its expert labels) and per-scene evaluation."""
     paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
                             goal_images=c.episodes.goal_images)
     first = next(iter(paths))
@@ -81,14 +81,14 @@ def _scene_set(c: TrainConfig):
     def envs(env_cfg):
         kw = dict(device=c.device, max_gaussians=c.render.max_gaussians)
         train_scene_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.train_env.split, **kw), **goal)
-        env_fn = multi_scene_env_fn(list(paths), train_scene_env, batch_size=c.train_env.batch_size,
-                                    num_active=c.scene.set.num_active, device=c.device,
-                                    memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)
-        log.info("scene set: %d scenes, %d active at a time; BC warm start on %s only", len(paths),
-                 env_fn.keywords["num_active"], first)
+        multi = partial(multi_scene_env_fn, list(paths), train_scene_env, batch_size=c.train_env.batch_size,
+                        num_active=c.scene.set.num_active, device=c.device,
+                        memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)
+        env_fn = multi()
+        log.info("scene set: %d scenes, %d active at a time (BC and PPO)", len(paths), env_fn.keywords["num_active"])
         eval_env = SceneSetEvaluation(list(paths), GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.eval.split,
                                                                                **kw), **goal), c.eval.batch_size)
-        return eval_env, env_fn, partial(train_scene_env, first, c.train_env.batch_size, c.seed)
+        return eval_env, env_fn, multi(global_episodes=True)
 
     return scene, None, scene_set_identity(paths), envs
 

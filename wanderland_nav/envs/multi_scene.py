@@ -19,7 +19,12 @@ Per-scene assets are built lazily by `make_scene_env(scene_id, sub_batch, seed)`
 distance field, LOD Gaussians, episodes) and held in `SceneLRU`, whose budget counts the bytes of every
 tensor and array reachable from the env (`measure_bytes`); the least recently bound scene not in use is
 dropped first. Metrics come out per scene (`pop_finished_by_scene`) and are aggregated overall, per scene
-and indoor/outdoor (`aggregate_by_scene`).
+and indoor/outdoor (`aggregate_by_scene`); `samples_by_scene` counts the agent-steps taken in each scene.
+
+`global_episodes=True` (behaviour cloning over a set): every scene is built once at construction to read
+its episodes (`scene_episodes`, kept; the envs themselves stay under the LRU budget), and the
+`episode_index` observation becomes global, `offset[scene] + local index` in `scene_ids` order, so one
+table of expert paths (`rl.scene_sets.set_expert_paths`) labels agents of every scene.
 """
 
 from __future__ import annotations
@@ -138,7 +143,7 @@ class MultiSceneNavEnv(EnvBase):
 
     def __init__(self, scene_ids: Sequence[str], make_scene_env: Callable[[str, int, int], EnvBase],
                  batch_size: Sequence[int] = (2,), num_active: int = 2, *, memory_budget_bytes: int | None = None,
-                 seed: int = 0, device: str | torch.device = "cpu"):
+                 seed: int = 0, device: str | torch.device = "cpu", global_episodes: bool = False):
         batch_size = torch.Size(batch_size)
         self.scene_ids = list(scene_ids)
         if len(set(self.scene_ids)) != len(self.scene_ids):
@@ -156,6 +161,15 @@ class MultiSceneNavEnv(EnvBase):
         self.cache = SceneLRU(self._load, memory_budget_bytes, on_evict=lambda k, env: self._stash_metrics(k, env))
         self.active: list[str | None] = [None] * self.num_active  # scene id bound to each slot
         self.history: list[tuple[int, str]] = []  # (slot, scene_id) per binding, in order
+        self.samples_by_scene: dict[str, int] = dict.fromkeys(self.scene_ids, 0)  # agent-steps per scene
+        self.scene_episodes: dict[str, tuple[list, np.ndarray]] = {}  # global_episodes: (episodes, nav_from_scene)
+        self._offsets: dict[str, int] | None = None
+        if global_episodes:
+            self._offsets = {}
+            for sid in self.scene_ids:  # in order: the offsets are the running episode counts
+                env = self.cache.get(sid)
+                self._offsets[sid] = sum(len(eps) for eps, _ in self.scene_episodes.values())
+                self.scene_episodes[sid] = (list(env.episodes), np.asarray(env.scene.nav_from_scene))
         self.set_seed(seed)
         self._make_specs(self.cache.get(self.scene_ids[0]))
 
@@ -218,6 +232,15 @@ class MultiSceneNavEnv(EnvBase):
         idx = [self.scene_ids.index(s) for s in self.active]
         return torch.tensor(idx, device=self.device).repeat_interleave(self.sub_batch).unsqueeze(-1)
 
+    def _stamp(self, out: TensorDictBase) -> TensorDictBase:
+        """Add each agent's scene index (and, with `global_episodes`, make its episode index global)."""
+        out.set(SCENE_INDEX, self._slot_scene_index())
+        if self._offsets is not None:
+            offsets = torch.tensor([self._offsets[s] for s in self.active], device=self.device)
+            ep = out.get(keys.EPISODE_INDEX)
+            out.set(keys.EPISODE_INDEX, ep + offsets.repeat_interleave(self.sub_batch).view(ep.shape).to(ep.dtype))
+        return out
+
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None if tensordict is None else tensordict.get(keys.RESET, None)
         b, outs = self.sub_batch, []
@@ -231,16 +254,14 @@ class MultiSceneNavEnv(EnvBase):
             else:
                 env = self._env(slot)
                 outs.append(env._reset(tensordict[slot * b:(slot + 1) * b]))
-        out = torch.cat(outs, 0)
-        out.set(SCENE_INDEX, self._slot_scene_index())
-        return out
+        return self._stamp(torch.cat(outs, 0))
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         b = self.sub_batch
         outs = [self._env(s)._step(tensordict[s * b:(s + 1) * b]) for s in range(self.num_active)]
-        out = torch.cat(outs, 0)
-        out.set(SCENE_INDEX, self._slot_scene_index())
-        return out
+        for sid in self.active:
+            self.samples_by_scene[sid] += b
+        return self._stamp(torch.cat(outs, 0))
 
     # ------------------------------------------------------------------ metrics
 

@@ -345,7 +345,9 @@ def _up_to_date(out: Path, digest: str) -> list[Episode] | None:
     return f.episodes
 
 
-GENERATOR_NAME = "wanderland_nav.expert"  # the `generator.name` this project writes into its episode files
+GENERATOR_NAME = "wanderland_nav.make_episodes"  # the `generator.name` this project writes into its episode files
+# names earlier versions wrote (the entry point was `wanderland_nav.expert`): their files are still ours
+OUR_GENERATOR_NAMES = (GENERATOR_NAME, "wanderland_nav.expert")
 
 
 def written_by_us(path: Path) -> bool:
@@ -355,7 +357,7 @@ def written_by_us(path: Path) -> bool:
     except (EpisodeFormatError, OSError):
         return False
     gen = f.extras.get("generator")
-    return isinstance(gen, dict) and gen.get("name") == GENERATOR_NAME
+    return isinstance(gen, dict) and gen.get("name") in OUR_GENERATOR_NAMES
 
 
 def generated_sibling(path: Path) -> Path:

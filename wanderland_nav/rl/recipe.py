@@ -15,9 +15,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.rl.bc import BCConfig, ExpertPaths, train_bc
+from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
+from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")
 
@@ -41,7 +42,7 @@ class Recipe:
     num_workers: int = 1
     progress: bool = True
     first_row: str = "untrained"
-    bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: its first scene); None: env_fn
+    bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: a MultiSceneNavEnv, global episodes); None: env_fn
     ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
 
 
@@ -83,8 +84,8 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
             log.info("BC already done; loaded its weights")
         else:
             train_env = (r.bc_env_fn or r.env_fn)()
-            paths = ExpertPaths.from_episodes(train_env.episodes, r.nav_from_scene)
-            stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed, progress=r.progress)
+            stats = behaviour_cloning(r.policy, train_env, r.nav_from_scene, r.bc, logger=r.logger, seed=r.seed,
+                                      progress=r.progress)
             train_env.close()
             bc_kw = dict(policy=r.policy, optimizer=None, counters={"bc_updates": r.bc.updates_per_round},
                          phase="bc_done", extra={"bc": stats}, **save_kw)
