@@ -134,8 +134,9 @@ class StudyCells:
         s = self.c.study
         ckpt = self.cell_dir(self.needs_producer(cell)) / CHECKPOINTS[cell.policy[1]]
         scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
+        n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
         _, results, table = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
-                                                num_episodes=s.eval_episodes, batch_size=s.eval_batch_size,
+                                                num_episodes=n, batch_size=min(s.eval_batch_size, n),
                                                 device=self.c.device, seed=cell.seed)
         res = next(iter(results.values()))
         atomic_write_json(folder / "result.json", {"cell": cell.key, "checkpoint": str(ckpt), "episodes_file":
@@ -145,6 +146,19 @@ class StudyCells:
 
     def needs_producer(self, cell: Cell) -> str:
         return cell.needs[0]  # study_plan._eval puts the policy's producer first
+
+
+def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
+    """`wanted` episodes of `split`, or all it has when fewer (logged): a broken navmesh yields fewer
+    episodes, and evaluating one twice would count it twice."""
+    from wanderland_nav.compose.episode_file import split_counts
+
+    have = split_counts(episodes).get(split, 0)
+    if have < 1:
+        raise RuntimeError(f"{episodes}: no {split!r} episodes on this navmesh; nothing to evaluate")
+    if wanted is not None and have < wanted:
+        log.warning("%s: only %d %r episodes (study.eval_episodes=%d): evaluating those", episodes, have, split, wanted)
+    return have if wanted is None else min(have, wanted)
 
 
 def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> dict[tuple, list[dict]]:
