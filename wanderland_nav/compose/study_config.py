@@ -25,6 +25,7 @@ class StudyGroup:
     seeds: List[int] = field(default_factory=lambda: [0])  # training seeds (policy init, episodes order, PPO)
     train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])  # `train` overrides: the recipe sizes
     fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
+    table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
     eval_split: str = "test"
     eval_episodes: Optional[int] = None  # null: every episode of the split
     eval_batch_size: int = 10

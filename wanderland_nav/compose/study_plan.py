@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Callable
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.study_config import StudyConfig, StudyGroup
+from wanderland_nav.compose.study_config import POLICY_PHASES, StudyConfig, StudyGroup
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -66,21 +66,26 @@ def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int) -> Ce
 
 def plan_cells(s: StudyGroup) -> list[Cell]:
     """Every cell in run order: builds; then per seed the untrained init, the grounded training and the
-    fixed (grounded-trained) policies in every environment (the Fig.-8 grid, so it is complete early),
-    then each degraded training and its policies in the grounded environment (the Table-3 rows)."""
+    fixed (grounded-trained) policies in the grounded environment; then per degraded environment the
+    fixed policies in it (its Fig.-8 column), its own training and that policy in the grounded
+    environment (its Table-3 rows), so a study cut short has whole environments, not half of each."""
     if len(set(s.presets)) != len(s.presets) or GROUNDED in s.presets:
         raise ValueError(f"study.presets={s.presets}: names must be distinct and not {GROUNDED!r}")
-    bad = [p for p in s.fixed_policies if p not in ("untrained", "BC", "BC+RL")]
-    if bad:
-        raise ValueError(f"study.fixed_policies: {bad} not among untrained, BC, BC+RL")
+    for what, phases, allowed in (("fixed_policies", s.fixed_policies, POLICY_PHASES),
+                                  ("table3_phases", s.table3_phases, POLICY_PHASES[1:])):
+        bad = [p for p in phases if p not in allowed]
+        if bad:
+            raise ValueError(f"study.{what}: {bad} not among {', '.join(allowed)}")
     cells = [Cell("build", p, s.degrade_seed) for p in s.presets]
     for seed in s.seeds:
         cells += [Cell("init", GROUNDED, seed), Cell("train", GROUNDED, seed)]
-        cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for env in (GROUNDED, *s.presets)
-                  for ph in s.fixed_policies]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.table3_phases
+                  if ph not in s.fixed_policies]
         for env in s.presets:
+            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
             cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
-            cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in ("BC", "BC+RL")]
+            cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
         if "untrained" not in s.fixed_policies:  # the Table-3 reference row
             cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s.degrade_seed))
     return cells

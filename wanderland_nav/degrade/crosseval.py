@@ -66,7 +66,8 @@ def _runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[str, str]
 
 
 def table3(records: Mapping[tuple, list[dict]], envs: Sequence[str], seeds: Sequence[int]) -> str:
-    """Every policy in the grounded env's test split; paired deltas vs grounded BC+RL and vs untrained."""
+    """Every policy in the grounded env's test split; paired deltas vs grounded BC+RL and vs untrained.
+    Rows appear for the (env, phase) pairs that were evaluated."""
     policies = [(GROUNDED, "untrained")] + [(e, ph) for e in envs for ph in ("BC", "BC+RL")]
     runs = {policy_label(*p): r for p in policies if (r := _runs(records, GROUNDED, p, seeds))}
     if not runs:
