@@ -52,6 +52,7 @@ class StudyCells:
         self.c, self.out, self.train_fn = c, Path(out), train_fn
         self.digests = cell_digests(c, cells)
         self.cells = {cell.key: cell for cell in cells}
+        self._envs: dict[tuple[str, int], tuple] = {}
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
@@ -78,7 +79,14 @@ class StudyCells:
         return _compose_inside_hydra("train", [*self.c.study.train, *extra])
 
     def env_episodes(self, env: str, seed: int):
-        """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them."""
+        """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them.
+        Kept per (env, seed) for the process: loading and checking a scene costs tens of seconds on a
+        loaded box, and nothing else writes it while the study runs."""
+        if (env, seed) not in self._envs:
+            self._envs[env, seed] = self._load_env_episodes(env, seed)
+        return self._envs[env, seed]
+
+    def _load_env_episodes(self, env: str, seed: int):
         from wanderland_nav.compose.episode_file import episodes_for_run
         from wanderland_nav.compose.scene import prepared_scene
         from wanderland_nav.compose.schema import TrainConfig, typed_config
