@@ -163,6 +163,8 @@ def test_table3_and_fig8_on_synthetic_results(tmp_path):
     want = np.mean([r["success"] for s in (0, 1) for r in rec[("drift", s, GROUNDED, "BC+RL")]])
     assert chart["SR"]["drift"]["grounded BC+RL"].value == pytest.approx(want)
     assert "no policy was evaluated" in table3({}, envs, [0])
+    bc_only = {k: v for k, v in rec.items() if k[3] != "BC+RL"}  # the grounded-trained baseline falls back to BC
+    assert "paired differences vs grounded BC" in table3(bc_only, envs, [0, 1])
 
 
 def test_chart_and_side_by_side_recording(tmp_path):

@@ -131,8 +131,15 @@ class StudyCells:
         if counts.get("train", 0) < 1 or counts.get(self.c.study.eval_split, 0) < 1:
             raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {t.episodes.num}); "
                                "too few to train and evaluate")
+        ppo = t.algo.ppo
+        updates = max(0, -(-ppo.total_frames // ppo.frames_per_batch) - ppo.critic_warmup_iters) if ppo.enabled else 0
+        if ppo.enabled and updates == 0:
+            log.warning("%s: algo.ppo.total_frames=%d is all critic warm-up (%d iteration(s) of %d frames): PPO "
+                        "makes no policy update, so BC+RL is the BC policy", cell.key, ppo.total_frames,
+                        ppo.critic_warmup_iters, ppo.frames_per_batch)
         rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
         return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
+                "ppo_policy_updates": updates,
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
 
     def _eval(self, cell: Cell, folder: Path) -> dict:

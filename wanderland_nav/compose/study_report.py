@@ -29,8 +29,9 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
             lines.append(f"  {status[c.key]}: {c.key}: {e.get('error') or 'needs ' + ', '.join(e.get('blocked_by', []))}")
         if c.kind == "train" and status[c.key] == "done":
             info = e["info"]
+            ppo = info.get("ppo_policy_updates")
             lines.append(f"  episodes in {c.env} (seed {c.seed}): {info['episodes']} of {info['asked']} asked, "
-                         f"trained in {e['seconds']:.0f}s")
+                         f"trained in {e['seconds']:.0f}s" + ("" if ppo is None else f", {ppo} PPO policy updates"))
     return lines
 
 

@@ -66,14 +66,16 @@ def _runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[str, str]
 
 
 def table3(records: Mapping[tuple, list[dict]], envs: Sequence[str], seeds: Sequence[int]) -> str:
-    """Every policy in the grounded env's test split; paired deltas vs grounded BC+RL and vs untrained.
+    """Every policy in the grounded env's test split; paired deltas vs the grounded-trained policy (BC+RL,
+    else BC) and vs untrained.
     Rows appear for the (env, phase) pairs that were evaluated."""
     policies = [(GROUNDED, "untrained")] + [(e, ph) for e in envs for ph in ("BC", "BC+RL")]
     runs = {policy_label(*p): r for p in policies if (r := _runs(records, GROUNDED, p, seeds))}
     if not runs:
         return "Table 3: no policy was evaluated in the grounded environment yet"
     parts = ["Table 3 analogue: trained in <env>, evaluated in the GROUNDED environment (its test split)"]
-    for base in (policy_label(GROUNDED, "BC+RL"), "untrained"):
+    trained = next((lab for ph in ("BC+RL", "BC") if (lab := policy_label(GROUNDED, ph)) in runs), None)
+    for base in (trained, "untrained"):  # the grounded-trained policy (its last phase evaluated), the random init
         if base in runs and len(runs) > 1:
             parts += [f"-- paired differences vs {base}", seed_table(runs, baseline=base)]
     if len(parts) == 1:
