@@ -11,7 +11,8 @@ import torch
 
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
 from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, plan_cells, run_cells
-from wanderland_nav.degrade.crosseval import fig8, kendall_tau_b, rank_agreement, ranking_text, table3
+from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
+                                              unpaired_difference)
 
 
 def _config(tmp_path, **study) -> StudyConfig:
@@ -131,6 +132,17 @@ def test_rank_agreement_interval_and_undefined_count():
     assert ranking_text(["a", "b", "c"], torch.tensor([0.2, 0.5, 0.2])) == "b > a = c"
 
 
+def test_unpaired_difference_of_two_environments_episodes():
+    d = unpaired_difference(torch.ones(1, 30, dtype=torch.float64), torch.zeros(1, 50, dtype=torch.float64))
+    assert (d.value, d.low, d.high, d.n) == (1.0, 1.0, 1.0, 80)
+    g = torch.Generator().manual_seed(0)
+    a = (torch.rand(1, 400, generator=g) < 0.7).double()
+    b = (torch.rand(1, 300, generator=g) < 0.4).double()
+    e = unpaired_difference(a, b, resamples=2000)
+    assert e.value == pytest.approx(float(a.mean() - b.mean())) and e.low < e.value < e.high
+    assert 0.15 < e.low and e.high < 0.45  # ~0.3 +- 2 x 0.036
+
+
 def _records(sr: float, n: int, seed: int) -> list[dict]:
     rng = np.random.default_rng(seed)
     ok = rng.random(n) < sr
@@ -157,7 +169,7 @@ def test_table3_and_fig8_on_synthetic_results(tmp_path):
     assert "paired differences vs grounded BC+RL" in t3 and "paired differences vs untrained" in t3
     assert "drift BC+RL - grounded BC+RL" in t3 and "x 2 seeds" in t3
     text, chart = fig8(rec, envs, ["untrained", "BC", "BC+RL"], [0, 1], resamples=100)
-    assert "-- in drift" in text and "tau" in text
+    assert "-- in drift" in text and "tau" in text and "SR in drift - in grounded" in text
     assert set(chart["SR"]) == set(envs) and set(chart["SR"]["drift"]) == {"untrained", "grounded BC",
                                                                             "grounded BC+RL"}
     want = np.mean([r["success"] for s in (0, 1) for r in rec[("drift", s, GROUNDED, "BC+RL")]])

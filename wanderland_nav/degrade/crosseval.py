@@ -61,6 +61,17 @@ def rank_agreement(ref: torch.Tensor, other: torch.Tensor, *, resamples: int = 1
     return {"tau": point, "low": lo, "high": hi, "undefined": int(resamples - len(ok)), "resamples": resamples}
 
 
+def unpaired_difference(a: torch.Tensor, b: torch.Tensor, *, resamples: int = 1000, seed: int = 0) -> Estimate:
+    """mean(a) - mean(b) for `[S, N_a]` and `[S, N_b]` scores on DIFFERENT episodes (two environments'
+    own test splits), with a percentile-bootstrap interval resampling each side's episodes on its own."""
+    gen = torch.Generator().manual_seed(seed)
+    ia = torch.randint(a.shape[-1], (resamples, a.shape[-1]), generator=gen)
+    ib = torch.randint(b.shape[-1], (resamples, b.shape[-1]), generator=gen)
+    d = a[:, ia].mean(dim=(0, 2)) - b[:, ib].mean(dim=(0, 2))  # [R]
+    lo, hi = torch.quantile(d, torch.tensor([0.025, 0.975], dtype=d.dtype)).tolist()
+    return Estimate(float(a.mean() - b.mean()), lo, hi, a.shape[-1] + b.shape[-1], a.shape[0])
+
+
 def _runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[str, str], seeds: Sequence[int]):
     return [records[(env, s, *policy)] for s in seeds if (env, s, *policy) in records]
 
@@ -98,6 +109,23 @@ def ranking_text(labels: Sequence[str], means: torch.Tensor) -> str:
     return out
 
 
+def _change_lines(records, envs: Sequence[str], fixed: Sequence[str], seeds: Sequence[int], resamples: int) -> list[str]:
+    """SR and IR of each fixed policy in each degraded env minus in the grounded env (unpaired: each env
+    has its own episodes), with bootstrap intervals."""
+    lines = []
+    for col in ("SR", "IR"):
+        for env in envs[1:]:
+            cells = []
+            for ph in fixed:
+                r, g = _runs(records, env, (GROUNDED, ph), seeds), _runs(records, GROUNDED, (GROUNDED, ph), seeds)
+                if r and g and len(r) == len(g):
+                    e = unpaired_difference(scores_of(r, col), scores_of(g, col), resamples=resamples)
+                    cells.append(f"{policy_label(GROUNDED, ph)} {e.value:+.3f} [{e.low:+.3f}, {e.high:+.3f}]")
+            if cells:
+                lines.append(f"{col} in {env} - in grounded (own episodes each, bootstrap): " + "; ".join(cells))
+    return lines
+
+
 def fig8(records: Mapping[tuple, list[dict]], envs: Sequence[str], fixed: Sequence[str], seeds: Sequence[int], *,
          metric: str = "SR", resamples: int = 1000) -> tuple[str, dict]:
     """-> (text, chart data {column: {env: {policy: Estimate}}}) for the fixed grounded-trained policies."""
@@ -115,12 +143,14 @@ def fig8(records: Mapping[tuple, list[dict]], envs: Sequence[str], fixed: Sequen
             chart[col][env] = {lab: estimate(r, col) for lab, r in runs.items()}
         if len(runs) == len(labels) and len({len(r) for r in runs.values()}) == 1:
             scores[env] = torch.stack([scores_of(runs[lab], metric) for lab in labels])  # [P, S, N]
+    lines.append("-- change of SR / IR when the same policy is evaluated in the degraded environment")
+    lines += _change_lines(records, envs, fixed, seeds, resamples)
     lines.append(f"-- ranking by {metric} (best first) and agreement with the grounded ranking "
                  f"(Kendall tau-b, 95 % bootstrap over episodes, {resamples} resamples)")
     for env, sc in scores.items():
         means = sc.mean(dim=(1, 2))
         order = ranking_text(labels, means)
-        row = f"{env:>12}: {order}  ({', '.join(f'{m:.2f}' for m in means.tolist())})"
+        row = f"{env:>12}: {order}  ({metric} {', '.join(f'{lab} {m:.2f}' for lab, m in zip(labels, means.tolist()))})"
         if env != GROUNDED and GROUNDED in scores:
             a = rank_agreement(scores[GROUNDED], sc, resamples=resamples)
             row += (f"  tau {a['tau']:+.2f} [{a['low']:+.2f}, {a['high']:+.2f}]"
