@@ -23,10 +23,10 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
     assert {e["status"] for e in manifest.values()} == {"done"}, {k: e for k, e in manifest.items()
                                                                   if e["status"] != "done"}
     table = written["table"].read_text()
-    assert "Table 3 analogue" in table and "scale_1.2 BC+RL - grounded BC+RL" in table
+    assert "Table 3 analogue" in table and "scale_1.2 BC - grounded BC" in table
     assert "-- in holes" in table and "episodes in scale_1.2" in table
     assert written["chart"].stat().st_size > 10_000 and written["recording"].stat().st_size > 10_000
-    result = json.loads(next((out / "cells" / "eval").glob("holes_grounded-BC_RL_*/result.json")).read_text())
+    result = json.loads(next((out / "cells" / "eval").glob("holes_grounded-BC_seed0_*/result.json")).read_text())
     assert len(result["records"]) == 3 and "holes" in result["episodes_file"]
 
     again = run(compose_config("study", overrides))  # every cell done: nothing re-runs, the table is the same
