@@ -42,6 +42,9 @@ def _compositions() -> list[tuple[str, list[str], list[Path]]]:
                 extra = ["scene.path=/data/some_scene"] if (group, opt.stem) == ("scene", "folder") else []
                 jobs.append((primary, [f"{group}={opt.stem}", *extra], [opt]))
         jobs.append((primary, ["debug=smoke"], [CONF / "debug_sizes" / f"smoke_{primary}.yaml"]))
+    for opt in sorted((CONF / "study").glob("*.yaml")):  # `+study=<name>`: appended, not a default of study.yaml
+        jobs.append(("study", [f"+study={opt.stem}"], [opt]))
+        jobs.append(("study", [f"+study={opt.stem}", "debug=smoke"], [opt]))
     for e in EXPS:
         jobs.append(("train", [f"+exp={e}"], [CONF / "exp" / f"{e}.yaml"]))
         jobs.append(("train", [f"+exp={e}", "debug=smoke"], [CONF / "exp" / f"{e}.yaml"]))
@@ -74,7 +77,8 @@ def test_typos_and_wrong_types_fail_at_compose_time_with_the_key_named(primary):
 
     from wanderland_nav.compose import SCHEMAS, typed_config
 
-    wrong_key = {"replay": "max_points", "recon_eval": "max_time_diff"}.get(primary, "scene.seed")  # no scene group
+    wrong_key = {"replay": "max_points", "recon_eval": "max_time_diff", "study": "source.demo_seed"}.get(
+        primary, "scene.seed")  # no scene group
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         typo = compose(primary, overrides=["+seeed=1"])
         wrong = compose(primary, overrides=[f"{wrong_key}=many"])

@@ -1,11 +1,14 @@
 """Geometry of the degraded environments against the grounded one: the table in README.md.
 
     python experiments/geometry_grounding/geometry_table.py --out /tmp/grounding --preset tiny --seeds 0 1 2
+    python experiments/geometry_grounding/geometry_table.py --out /tmp/grounding_kitti --kitti --seeds 0 1 2
 
 Builds the demo block (or uses --scene), prepares it, generates its grounded expert episodes, then for
 every degradation preset and seed builds, prepares and measures the degraded copy. Prints one markdown
 row per preset: mean over seeds with [min, max] (deterministic presets run once), plus the grounded
-scene's own row against the ground-truth mesh as the reference.
+scene's own row against the ground-truth mesh as the reference. `--kitti`: the six real KITTI scans as a
+LiDAR-only scene (`experiments/real_streets/kitti_street.py`); presets that need a splat are reported
+as not applicable, with the builder's reason.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--scene", type=Path, default=None, help="a grounded scene folder (default: the demo block)")
+    ap.add_argument("--kitti", action="store_true", help="the real KITTI street (LiDAR-only) as the grounded scene")
     ap.add_argument("--preset", default="tiny", help="demo preset when --scene is not given")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--episodes", type=int, default=60)
@@ -51,32 +55,55 @@ def main() -> None:
     from wanderland_nav.episodes.schema import load_episodes
     from wanderland_nav.scene import load_scene, make_demo_scene
 
-    src = args.scene or make_demo_scene(args.out / f"demo_{args.preset}", seed=0, preset=args.preset)
+    src = args.scene
+    if args.kitti:
+        import sys
+
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "real_streets"))
+        from kitti_street import make_scene
+
+        src = args.out / "kitti_street"
+        if not (src / "lidar" / "poses.txt").is_file():  # a re-copy would change mtimes and rebuild every copy
+            make_scene(src)
+    src = src or make_demo_scene(args.out / f"demo_{args.preset}", seed=0, preset=args.preset)
     grounded = _prepare(src)
     ep_path = args.out / "grounded_episodes.json"
     if not ep_path.is_file():
         write_scene_episodes(grounded, NavMesh.load(grounded.navmesh_path), ep_path, num_episodes=args.episodes,
                              seed=0, settings=GeneratorSettings(goal_images=False))
     episodes = load_episodes(ep_path)
+    not_applicable: dict[str, str] = {}
     rows = {"grounded": [degradation_report(grounded, grounded, episodes=episodes, samples=args.samples)]}
     for name in PRESETS:
         for seed in (args.seeds if name in STOCHASTIC else args.seeds[:1]):
             t0 = time.perf_counter()
-            out = build_degraded_scene(src, args.out / f"{name}_s{seed}", preset(name, seed))
+            try:
+                out = build_degraded_scene(src, args.out / f"{name}_s{seed}", preset(name, seed))
+            except ValueError as e:
+                if "not applicable" not in str(e):
+                    raise
+                print(f"{name}: {e}", flush=True)
+                not_applicable[name] = str(e).split(": ", 1)[-1]
+                break
             row = degradation_report(grounded, _prepare(out), episodes=episodes, samples=args.samples)
             row["build_s"] = time.perf_counter() - t0
             rows.setdefault(name, []).append(row)
             print(json.dumps({"preset": name, "seed": seed, **row}), flush=True)
     (args.out / "geometry_rows.json").write_text(json.dumps(rows, indent=1))
     print(f"\nscene: {load_scene(src).name}, {len(episodes)} grounded expert episodes, seeds {args.seeds}")
-    print("| environment | n | " + " | ".join(COLUMNS) + " |")
-    print("|---" * (len(COLUMNS) + 2) + "|")
+    # a scene without a GT mesh (KITTI) has no vs_gt_mesh figures: those columns are left out
+    columns = [c for c in COLUMNS if c == "feasible" or any(c in r for rs in rows.values() for r in rs)]
+    print("| environment | n | " + " | ".join(columns) + " |")
+    print("|---" * (len(columns) + 2) + "|")
     for name, rs in rows.items():
         cells = []
-        for c in COLUMNS:
-            v = np.array([r["episodes_feasible"] / r["episodes"] if c == "feasible" else r[c] for r in rs], float)
+        for c in columns:
+            v = np.array([r["episodes_feasible"] / r["episodes"] if c == "feasible" else r.get(c, np.nan)
+                          for r in rs], float)
             cells.append(f"{v.mean():.3g}" + (f" [{v.min():.3g}, {v.max():.3g}]" if len(v) > 1 else ""))
         print(f"| {name} | {len(rs)} | " + " | ".join(cells) + " |")
+    for name, why in not_applicable.items():
+        print(f"| {name} | 0 | not applicable: {why} |" + " |" * (len(columns) - 1))
 
 
 if __name__ == "__main__":

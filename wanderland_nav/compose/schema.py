@@ -20,6 +20,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from omegaconf import DictConfig, OmegaConf
 
 from planners import NavMeshSettings
+from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.gsfit.trainer import FitConfig
@@ -310,7 +311,7 @@ class ReconEvalConfig:
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
            "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig,
-           "export_usd": ExportUsdConfig}
+           "export_usd": ExportUsdConfig, "study": StudyConfig}
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):

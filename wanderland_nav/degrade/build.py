@@ -1,7 +1,9 @@
 """`build_degraded_scene(src, out, spec)`: a degraded copy of a grounded scene folder.
 
 The output is an ordinary v1 scene folder (COLMAP model, `raw_pcd.ply`, `3dgs.ply`, images,
-`scene_meta.json`), so `prepare`, `expert`, `train` and `evaluate` consume it unchanged. What changes:
+`scene_meta.json`), so `prepare`, `expert`, `train` and `evaluate` consume it unchanged. A LiDAR-only v2
+scene (`lidar/*.bin` + `lidar/poses.txt`, no camera model) gets a LiDAR-only copy instead
+(`lidar_only.py`: each scan moves with its own degraded pose). What changes:
 
 * every pose and every reconstructed point/Gaussian goes through the pose-error field
   (`poses.PoseCorrection`: drift about the camera that saw it, then the global scale);
@@ -35,6 +37,7 @@ from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
 
 from .damage import fragment_mask, hole_mask, horizontal_xy
+from .lidar_only import write_lidar_only
 from .poses import PoseCorrection, pose_correction
 from .spec import DegradeSpec
 
@@ -143,6 +146,8 @@ def _meta(src: Path, scene, spec: DegradeSpec, figures: dict) -> dict:
                 **{k: float(r[k]) * s for k in ("z_min", "z_max") if k in r}}
                for r in meta.get("indoor_regions", [])]
     gen = meta.pop("generator", None)
+    if "lidar_min_range" in meta:  # sensor-frame metres: the scans are scaled with the world
+        meta["lidar_min_range"] = float(meta["lidar_min_range"]) * s
     return {**meta, "name": f"{scene.name}__{spec.name}", "up_axis": scene.up_axis, "indoor_regions": regions,
             "degradation": {"spec": spec.as_dict(), "source": str(src), "source_name": scene.name,
                             "source_generator": gen, "figures": figures}}
@@ -165,11 +170,15 @@ def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = N
                               "choose another output folder")
     scene = load_scene(src, up_axis=up_axis)
     sdir = _sparse_dir(src)
-    if sdir is None or not scene.cameras:
-        raise ValueError(f"{src}: degraded builds need a capture trajectory in a COLMAP model (sparse/0); "
-                         f"this scene has {len(scene.cameras)} cameras and no model")
+    lidar_only = sdir is None and not scene.cameras and scene.lidar_poses is not None
+    if not lidar_only and (sdir is None or not scene.cameras):
+        raise ValueError(f"{src}: degraded builds need a capture trajectory: a COLMAP model (sparse/0) or "
+                         f"LiDAR scans with lidar/poses.txt; this scene has {len(scene.cameras)} cameras and neither")
     pose_rng, damage_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(spec.seed).spawn(2))
-    corr = pose_correction(scene.camera_centers(), scene.up_axis, spec, pose_rng)
+    corr = pose_correction(scene.capture_positions(), scene.up_axis, spec, pose_rng)
+    if lidar_only:
+        return _write_scene(out, marker, key, spec, src, scene, corr,
+                            lambda tmp: write_lidar_only(src, tmp, scene, spec, corr, damage_rng))
 
     if spec.geometry == "splats":
         if scene.gaussians_path is None:
@@ -188,16 +197,28 @@ def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = N
     figures = {"points_in": int(len(xyz)), "points_kept": int(keep.sum()), "holes": n_holes,
                "fragments_dropped": n_tiles, "lidar_points": int(len(scene.points))}
 
-    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+
+    def write(tmp: Path) -> dict:
         _link_tree(src, tmp)
         write_ply_points(tmp / "raw_pcd.ply", corr.apply_points(xyz[keep]).astype(np.float32), rgb[keep])
         _degrade_colmap(sdir, src, tmp, corr)
         _degrade_transforms(src, tmp, corr)
         if scene.gaussians_path is not None:
             _degrade_gaussians(scene.gaussians_path, tmp / "3dgs.ply", corr)
+        return figures
+
+    return _write_scene(out, marker, key, spec, src, scene, corr, write)
+
+
+def _write_scene(out: Path, marker: Path, key: str, spec: DegradeSpec, src: Path, scene, corr: PoseCorrection,
+                 write) -> Path:
+    """`write(tmp) -> figures` fills a temporary sibling folder; then the correction field, the metadata
+    and the marker are added and the folder is renamed into place."""
+    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        figures = write(tmp)
         corr.save(tmp / CORRECTION)
         atomic_write_json(tmp / "scene_meta.json", _meta(src, scene, spec, figures))
         atomic_write_json(tmp / MARKER, {"key": key, "spec": spec.as_dict(), "source": str(src)})

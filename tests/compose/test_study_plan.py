@@ -1,0 +1,200 @@
+"""The grounding study's cell plan, resume logic, tables and outputs on synthetic results (fast)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
+from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, plan_cells, run_cells
+from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
+                                              unpaired_difference)
+
+
+def _config(tmp_path, **study) -> StudyConfig:
+    return StudyConfig(study=StudyGroup(**{"presets": ["scale_1.2", "holes"], "seeds": [0, 1], **study}),
+                       out=str(tmp_path))
+
+
+def test_plan_has_every_cell_once_and_needs_come_first(tmp_path):
+    cells = plan_cells(_config(tmp_path).study)
+    keys = [c.key for c in cells]
+    assert len(keys) == len(set(keys))
+    # 2 builds + per seed: init, grounded train, 3 fixed policies x 3 envs, per preset a train + BC, BC+RL evals
+    assert len(cells) == 2 + 2 * (2 + 9 + 2 * 3)
+    seen = set()
+    for c in cells:
+        assert set(c.needs) <= seen, f"{c.key} planned before {set(c.needs) - seen}"
+        seen.add(c.key)
+    evals = [c for c in cells if c.kind == "eval" and c.seed == 0]
+    table3_rows = {c.policy for c in evals if c.env == GROUNDED}
+    assert table3_rows == {(GROUNDED, "untrained"), *((e, ph) for e in (GROUNDED, "scale_1.2", "holes")
+                                                      for ph in ("BC", "BC+RL"))}
+    assert {c.env for c in evals if c.policy == (GROUNDED, "BC+RL")} == {GROUNDED, "scale_1.2", "holes"}
+
+
+@pytest.mark.parametrize("study, match", [(dict(presets=["drift", "drift"]), "distinct"),
+                                          (dict(presets=["grounded"]), "distinct"),
+                                          (dict(fixed_policies=["BC", "PPO"]), "PPO")])
+def test_plan_rejects_bad_grids(tmp_path, study, match):
+    with pytest.raises(ValueError, match=match):
+        plan_cells(_config(tmp_path, **study).study)
+
+
+def test_digests_follow_what_a_cell_depends_on(tmp_path):
+    c = _config(tmp_path)
+    base = cell_digests(c, plan_cells(c.study))
+    recipe = dataclasses.replace(c, study=dataclasses.replace(c.study, train=["+exp=citywalker_rl", "seed=3"]))
+    changed = cell_digests(recipe, plan_cells(recipe.study))
+    assert changed["build/holes/seed0"] == base["build/holes/seed0"]  # the scenes do not depend on the recipe
+    assert changed["train/holes/seed0"] != base["train/holes/seed0"]
+    assert changed["eval/grounded/seed0/holes:BC+RL"] != base["eval/grounded/seed0/holes:BC+RL"]
+    reseeded = dataclasses.replace(c, study=dataclasses.replace(c.study, degrade_seed=5))
+    moved = cell_digests(reseeded, plan_cells(reseeded.study))
+    assert "build/holes/seed5" in moved and moved["train/holes/seed0"] != base["train/holes/seed0"]
+    assert moved["train/grounded/seed0"] == base["train/grounded/seed0"]
+
+
+def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
+    c = _config(tmp_path, seeds=[0])
+    cells = plan_cells(c.study)
+    calls = []
+
+    def execute(cell, folder):
+        calls.append(cell.key)
+        if cell.key == "train/holes/seed0":
+            raise RuntimeError("only {'test': 0} episodes on this navmesh")
+        return {"ok": cell.key}
+
+    m = run_cells(c, cells, execute, tmp_path)
+    assert len(calls) == len(cells) - 2  # the two evals of the holes-trained policy are blocked
+    assert m.entries["train/holes/seed0"]["status"] == "failed"
+    assert "only {'test': 0} episodes" in m.entries["train/holes/seed0"]["error"]
+    assert m.entries["eval/grounded/seed0/holes:BC"]["blocked_by"] == ["train/holes/seed0"]
+    assert Manifest(tmp_path / "done.json").entries == m.entries  # on disk after every cell
+
+    calls.clear()
+    run_cells(c, cells, execute, tmp_path)
+    assert calls == []  # done cells skipped, the failed one not retried, its dependants still blocked
+
+    retry = dataclasses.replace(c, study=dataclasses.replace(c.study, retry_failed=True))
+    m = run_cells(retry, cells, lambda cell, folder: calls.append(cell.key) or {}, tmp_path)
+    assert calls == ["train/holes/seed0", "eval/grounded/seed0/holes:BC", "eval/grounded/seed0/holes:BC+RL"]
+    assert all(e["status"] == "done" for e in m.entries.values())
+
+
+def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
+    from wanderland_nav.compose.cli import compose_config
+
+    c = study_config(compose_config("study", ["+study=grounding", "debug=smoke"]))
+    assert c.study.presets == ["scale_1.2", "holes"] and c.study.eval_episodes == 3
+    assert "debug=smoke" in c.study.train
+    full = study_config(compose_config("study", ["+study=grounding"]))
+    assert sorted(full.study.presets) == ["drift", "scale_0.8", "scale_1.2", "splat_mesh", "video3dgs"]
+    with pytest.raises(Exception, match="eval_episode"):
+        study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
+
+
+# ------------------------------------------------------------------ cross-evaluation tables
+
+
+def test_kendall_tau_b_matches_scipy_with_and_without_ties():
+    from scipy.stats import kendalltau
+
+    g = torch.Generator().manual_seed(0)
+    for _ in range(20):
+        x = torch.randint(0, 4, (6,), generator=g).double()
+        y = torch.randint(0, 4, (6,), generator=g).double()
+        want = kendalltau(x.numpy(), y.numpy()).statistic
+        got = float(kendall_tau_b(x, y))
+        assert (math.isnan(want) and math.isnan(got)) or got == pytest.approx(want, abs=1e-12)
+    assert float(kendall_tau_b(torch.tensor([1.0, 2, 3]), torch.tensor([3.0, 2, 1]))) == -1.0
+    assert math.isnan(float(kendall_tau_b(torch.tensor([1.0, 2, 3]), torch.zeros(3))))
+    batched = kendall_tau_b(torch.tensor([[1.0, 2, 3], [1, 2, 3]]), torch.tensor([[1.0, 2, 3], [3, 2, 1]]))
+    assert batched.tolist() == [1.0, -1.0]
+
+
+def test_rank_agreement_interval_and_undefined_count():
+    g = torch.Generator().manual_seed(1)
+    p = torch.tensor([0.1, 0.5, 0.9])[:, None, None]
+    ref = (torch.rand(3, 1, 200, generator=g) < p).double()
+    same = (torch.rand(3, 1, 150, generator=g) < p).double()
+    a = rank_agreement(ref, same, resamples=300)
+    assert a["tau"] == 1.0 and a["low"] == 1.0 and a["undefined"] == 0
+    flipped = rank_agreement(ref, same.flip(0), resamples=300)
+    assert flipped["tau"] == -1.0 and flipped["high"] == -1.0
+    tied = rank_agreement(ref, torch.zeros(3, 1, 40, dtype=torch.float64), resamples=50)
+    assert tied["undefined"] == 50 and math.isnan(tied["tau"])
+    assert ranking_text(["a", "b", "c"], torch.tensor([0.2, 0.5, 0.2])) == "b > a = c"
+
+
+def test_unpaired_difference_of_two_environments_episodes():
+    d = unpaired_difference(torch.ones(1, 30, dtype=torch.float64), torch.zeros(1, 50, dtype=torch.float64))
+    assert (d.value, d.low, d.high, d.n) == (1.0, 1.0, 1.0, 80)
+    g = torch.Generator().manual_seed(0)
+    a = (torch.rand(1, 400, generator=g) < 0.7).double()
+    b = (torch.rand(1, 300, generator=g) < 0.4).double()
+    e = unpaired_difference(a, b, resamples=2000)
+    assert e.value == pytest.approx(float(a.mean() - b.mean())) and e.low < e.value < e.high
+    assert 0.15 < e.low and e.high < 0.45  # ~0.3 +- 2 x 0.036
+
+
+def _records(sr: float, n: int, seed: int) -> list[dict]:
+    rng = np.random.default_rng(seed)
+    ok = rng.random(n) < sr
+    return [{"episode_id": f"ep{i}", "navigation_error": float(0.5 if s else 8.0), "distance_to_goal": float(0.5 if s else 9.0),
+             "success": float(s), "spl": float(0.8 * s), "intervention": float(not s and rng.random() < 0.3)}
+            for i, s in enumerate(ok)]
+
+
+def _synthetic():
+    envs = [GROUNDED, "drift"]
+    rec = {}
+    for seed in (0, 1):
+        for env, shift in ((GROUNDED, 0.0), ("drift", -0.3)):
+            for k, ph in enumerate(("untrained", "BC", "BC+RL")):
+                rec[(env, seed, GROUNDED, ph)] = _records(max(0.05, 0.2 + 0.3 * k + shift), 40, 10 * seed + k)
+        for k, ph in enumerate(("BC", "BC+RL")):
+            rec[(GROUNDED, seed, "drift", ph)] = _records(0.4 - 0.1 * k, 40, 100 + seed + k)
+    return envs, rec
+
+
+def test_table3_and_fig8_on_synthetic_results(tmp_path):
+    envs, rec = _synthetic()
+    t3 = table3(rec, envs, [0, 1])
+    assert "paired differences vs grounded BC+RL" in t3 and "paired differences vs untrained" in t3
+    assert "drift BC+RL - grounded BC+RL" in t3 and "x 2 seeds" in t3
+    text, chart = fig8(rec, envs, ["untrained", "BC", "BC+RL"], [0, 1], resamples=100)
+    assert "-- in drift" in text and "tau" in text and "SR in drift - in grounded" in text
+    assert set(chart["SR"]) == set(envs) and set(chart["SR"]["drift"]) == {"untrained", "grounded BC",
+                                                                            "grounded BC+RL"}
+    want = np.mean([r["success"] for s in (0, 1) for r in rec[("drift", s, GROUNDED, "BC+RL")]])
+    assert chart["SR"]["drift"]["grounded BC+RL"].value == pytest.approx(want)
+    assert "no policy was evaluated" in table3({}, envs, [0])
+    bc_only = {k: v for k, v in rec.items() if k[3] != "BC+RL"}  # the grounded-trained baseline falls back to BC
+    assert "paired differences vs grounded BC" in table3(bc_only, envs, [0, 1])
+
+
+def test_chart_and_side_by_side_recording(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    from wanderland_nav.viz.rerun_side_by_side import write_side_by_side
+    from wanderland_nav.viz.study_chart import write_study_chart
+
+    envs, rec = _synthetic()
+    _, chart = fig8(rec, envs, ["untrained", "BC", "BC+RL"], [0, 1], resamples=50)
+    png = write_study_chart(tmp_path / "fig8.png", chart, title="synthetic")
+    assert Image.open(png).size[0] > 300
+    a, b = tmp_path / "a.ply", tmp_path / "b.ply"
+    trimesh.creation.box(extents=(4, 1, 2)).export(a)
+    trimesh.creation.box(extents=(2, 1, 2)).export(b)
+    offsets = write_side_by_side(tmp_path / "m.rrd", {"grounded": a, "drift": b}, gap=3.0)
+    assert offsets == pytest.approx({"grounded": 2.0, "drift": 4.0 + 3.0 + 1.0})  # min x of each at 0 and 7
+    assert (tmp_path / "m.rrd").stat().st_size > 1000
+    with pytest.raises(ValueError, match="no estimates"):
+        write_study_chart(tmp_path / "x.png", {"SR": {}, "IR": {}})

@@ -1,0 +1,186 @@
+"""What each study cell does (`study_plan.Cell`): build a degraded scene, save the untrained policy,
+run one `train` run, evaluate one checkpoint on one environment's test split.
+
+Every environment is an ordinary scene folder: the grounded source, or a degraded copy written by
+`wanderland_nav.degrade`. Each gets its OWN episodes, generated on its own navmesh with the same
+`episodes.*` settings (so a broken navmesh yields fewer episodes, which the `train` cell records), and
+every run and evaluation in an environment uses that environment's episodes file.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Callable
+
+import torch
+from omegaconf import OmegaConf
+
+from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.compose.study_config import StudyConfig
+from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
+
+log = logging.getLogger("wanderland_nav.study")
+
+#: phase -> checkpoint file inside the producing cell's folder
+CHECKPOINTS = {"untrained": "untrained.pt", "BC": "checkpoints/bc.pt", "BC+RL": "checkpoints/last.pt"}
+
+
+def _compose_inside_hydra(name: str, overrides: list[str]):
+    """`compose_config` also from within a running `@hydra.main` (the study's own), whose global state
+    is set aside for the call and restored after."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    from wanderland_nav.compose.cli import compose_config
+
+    outer = GlobalHydra.instance().hydra if GlobalHydra.instance().is_initialized() else None
+    GlobalHydra.instance().clear()
+    try:
+        return compose_config(name, overrides)
+    finally:
+        GlobalHydra.instance().clear()
+        if outer is not None:
+            GlobalHydra.instance().initialize(outer)
+
+
+class StudyCells:
+    """`execute(cell, folder) -> info` for `study_plan.run_cells`. `train_fn(cfg) -> rows` runs one
+    composed `train` config (the `train` entry point's `run`), so a cell is exactly that command."""
+
+    def __init__(self, c: StudyConfig, out: Path, train_fn: Callable, cells: list[Cell]):
+        self.c, self.out, self.train_fn = c, Path(out), train_fn
+        self.digests = cell_digests(c, cells)
+        self.cells = {cell.key: cell for cell in cells}
+        self._envs: dict[tuple[str, int], tuple] = {}
+
+    # ------------------------------------------------------------------ where things are
+    def source(self) -> Path:
+        from wanderland_nav.compose.schema import SceneGroup
+        from wanderland_nav.compose.scene import scene_folder
+
+        s = self.c.source
+        return scene_folder(SceneGroup(name="source", path=s.path, demo=s.demo, seed=s.demo_seed,
+                                       preset=s.demo_preset)).resolve()
+
+    def env_path(self, env: str) -> Path:
+        return self.source() if env == GROUNDED else (self.out / "scenes" / f"{env}_s{self.c.study.degrade_seed}")
+
+    def cell_dir(self, key: str) -> Path:
+        cell = self.cells[key]
+        return self.out / "cells" / cell.kind / cell.folder_name(self.digests[key])
+
+    def train_config(self, env: str, seed: int, run_dir: Path | None = None):
+        """`train`'s composed config for `env`: the study's recipe overrides + scene, seed, folder."""
+        extra = [f"scene={self.env_path(env)}", f"seed={seed}", f"device={self.c.device}",
+                 f"exp_name=study_{self.c.study.name}_{env}", "progress=false"]
+        extra += [f"threads={self.c.threads}"] if self.c.threads else []
+        extra += [f"run_dir={run_dir}"] if run_dir is not None else []
+        return _compose_inside_hydra("train", [*self.c.study.train, *extra])
+
+    def env_episodes(self, env: str, seed: int):
+        """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them.
+        Kept per (env, seed) for the process: loading and checking a scene costs tens of seconds on a
+        loaded box, and nothing else writes it while the study runs."""
+        if (env, seed) not in self._envs:
+            self._envs[env, seed] = self._load_env_episodes(env, seed)
+        return self._envs[env, seed]
+
+    def _load_env_episodes(self, env: str, seed: int):
+        from wanderland_nav.compose.episode_file import episodes_for_run
+        from wanderland_nav.compose.scene import prepared_scene
+        from wanderland_nav.compose.schema import TrainConfig, typed_config
+
+        t = typed_config(self.train_config(env, seed), TrainConfig)
+        scene = prepared_scene(t.scene, t.navigation)
+        own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
+        path = episodes_for_run(scene, Path(own), num=t.episodes.num, seed=t.episodes.seed,
+                                splits=tuple(t.episodes.splits), goal_images=t.episodes.goal_images)
+        return scene, path, t
+
+    # ------------------------------------------------------------------ the cells
+    def __call__(self, cell: Cell, folder: Path) -> dict:
+        return getattr(self, f"_{cell.kind}")(cell, folder)
+
+    def _build(self, cell: Cell, folder: Path) -> dict:
+        from wanderland_nav.degrade import build_degraded_scene, preset
+
+        path = build_degraded_scene(self.source(), self.env_path(cell.env), preset(cell.env, cell.seed),
+                                    device=self.c.device)
+        meta = json.loads((path / "scene_meta.json").read_text())["degradation"]
+        return {"scene": str(path), "figures": meta["figures"]}
+
+    def _init(self, cell: Cell, folder: Path) -> dict:
+        """The untrained policy of seed s: `train`'s policy config, initialised after `torch.manual_seed(s)`."""
+        from wanderland_nav.compose.build import make_policy_from_config
+        from wanderland_nav.rl.checkpoint import save_checkpoint
+
+        cfg = self.train_config(GROUNDED, cell.seed)
+        conf = OmegaConf.to_container(cfg, resolve=True)
+        torch.manual_seed(cell.seed)
+        policy = make_policy_from_config(conf["policy"], self.c.device)
+        save_checkpoint(folder / CHECKPOINTS["untrained"], policy=policy, optimizer=None, counters={}, config=conf,
+                        phase="untrained")
+        return {"checkpoint": str(folder / CHECKPOINTS["untrained"])}
+
+    def _train(self, cell: Cell, folder: Path) -> dict:
+        from wanderland_nav.compose.episode_file import split_counts
+
+        _, episodes, t = self.env_episodes(cell.env, cell.seed)  # made here so a too-broken navmesh fails clearly
+        counts = split_counts(episodes)
+        if counts.get("train", 0) < 1 or counts.get(self.c.study.eval_split, 0) < 1:
+            raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {t.episodes.num}); "
+                               "too few to train and evaluate")
+        ppo = t.algo.ppo
+        updates = max(0, -(-ppo.total_frames // ppo.frames_per_batch) - ppo.critic_warmup_iters) if ppo.enabled else 0
+        if ppo.enabled and updates == 0:
+            log.warning("%s: algo.ppo.total_frames=%d is all critic warm-up (%d iteration(s) of %d frames): PPO "
+                        "makes no policy update, so BC+RL is the BC policy", cell.key, ppo.total_frames,
+                        ppo.critic_warmup_iters, ppo.frames_per_batch)
+        rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
+        return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
+                "ppo_policy_updates": updates,
+                "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
+
+    def _eval(self, cell: Cell, folder: Path) -> dict:
+        from wanderland_nav.compose.build import load_navmesh
+        from wanderland_nav.compose.comparison import compare_checkpoints
+
+        s = self.c.study
+        ckpt = self.cell_dir(self.needs_producer(cell)) / CHECKPOINTS[cell.policy[1]]
+        scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
+        n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
+        _, results, table = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
+                                                num_episodes=n, batch_size=min(s.eval_batch_size, n),
+                                                device=self.c.device, seed=cell.seed)
+        res = next(iter(results.values()))
+        atomic_write_json(folder / "result.json", {"cell": cell.key, "checkpoint": str(ckpt), "episodes_file":
+                                                   str(episodes), "records": res.records, "summary": res.summary})
+        log.info("%s:\n%s", cell.key, table)
+        return {m: res.summary["overall"][m] for m in ("SR", "IR", "NE", "SPL", "episodes")}
+
+    def needs_producer(self, cell: Cell) -> str:
+        return cell.needs[0]  # study_plan._eval puts the policy's producer first
+
+
+def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
+    """`wanted` episodes of `split`, or all it has when fewer (logged): a broken navmesh yields fewer
+    episodes, and evaluating one twice would count it twice."""
+    from wanderland_nav.compose.episode_file import split_counts
+
+    have = split_counts(episodes).get(split, 0)
+    if have < 1:
+        raise RuntimeError(f"{episodes}: no {split!r} episodes on this navmesh; nothing to evaluate")
+    if wanted is not None and have < wanted:
+        log.warning("%s: only %d %r episodes (study.eval_episodes=%d): evaluating those", episodes, have, split, wanted)
+    return have if wanted is None else min(have, wanted)
+
+
+def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> dict[tuple, list[dict]]:
+    """(eval env, seed, trained-in env, phase) -> per-episode records of every eval cell done with its hash."""
+    out = {}
+    for cell in cells:
+        e = manifest.entries.get(cell.key)
+        if cell.kind == "eval" and manifest.status(cell.key, digests[cell.key]) == "done":
+            out[(cell.env, cell.seed, *cell.policy)] = json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
+    return out

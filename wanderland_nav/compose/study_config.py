@@ -1,0 +1,66 @@
+"""The typed shape of `python -m wanderland_nav.study +study=<name>` (`conf/study.yaml`, `conf/study/*.yaml`).
+
+Why a schema of its own: the study is a grid of ordinary `train` runs and evaluations; its own keys are
+the grid (which degraded environments, which seeds, which fixed policies) and the evaluation sizes,
+while the recipe sizes stay `train` overrides (`study.train`), typed by `train`'s own schema when each
+cell composes its config. A typo fails before any cell runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+#: the phases a training run leaves a checkpoint for (`rl/recipe.py`: `bc.pt`, `last.pt`), and the random init
+POLICY_PHASES = ("untrained", "BC", "BC+RL")
+
+
+@dataclass
+class StudyGroup:
+    """`conf/study/<name>.yaml`: the grid and its sizes."""
+
+    name: str = "grounding"
+    presets: List[str] = field(default_factory=lambda: ["scale_0.8", "scale_1.2", "drift", "splat_mesh", "video3dgs"])
+    degrade_seed: int = 0  # the seed of the stochastic degradations (drift, holes): one degraded world per preset
+    seeds: List[int] = field(default_factory=lambda: [0])  # training seeds (policy init, episodes order, PPO)
+    train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])  # `train` overrides: the recipe sizes
+    fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
+    table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
+    eval_split: str = "test"
+    eval_episodes: Optional[int] = None  # null: every episode of the split
+    eval_batch_size: int = 10
+    rank_metric: str = "SR"  # the metric policies are ranked by in the Fig.-8 agreement
+    bootstrap_resamples: int = 1000
+    retry_failed: bool = False  # a failed cell (e.g. a navmesh too broken for episodes) is re-run on restart
+
+
+@dataclass
+class SourceScene:
+    """The grounded scene every environment is built from: the demo block or a scene folder."""
+
+    path: str = "data/scenes/demo"
+    demo: bool = True
+    demo_seed: int = 0
+    demo_preset: str = "tiny"
+
+
+@dataclass
+class StudyConfig:
+    study: StudyGroup = field(default_factory=StudyGroup)
+    source: SourceScene = field(default_factory=SourceScene)
+    out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
+    threads: Optional[int] = None  # torch intra-op threads for every cell
+    device: str = "cpu"
+    study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
+
+
+def study_config(cfg) -> StudyConfig:
+    """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study`."""
+    from omegaconf import OmegaConf
+
+    from wanderland_nav.compose.schema import typed_config
+
+    cfg = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    if cfg.get("study_debug"):
+        cfg.study = OmegaConf.merge(cfg.get("study") or {}, cfg.study_debug)
+    return typed_config(cfg, StudyConfig)

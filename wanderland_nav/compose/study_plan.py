@@ -1,0 +1,165 @@
+"""The grounding study as a list of cells, and the done-manifest that makes it resumable.
+
+A cell is one unit of work with one folder: `build` (a degraded scene), `init` (the untrained policy of
+a seed, saved as a checkpoint so every evaluation loads policies the same way), `train` (one `train`
+run: BC then PPO in one environment) and `eval` (one policy evaluated on one environment's test
+split). Each cell's inputs are hashed together with the hashes of the cells it needs, so changing the
+recipe or a preset re-runs exactly the cells downstream of it; the folder name carries that hash
+(`cells/<kind>/<what>_seed<s>_<hash8>`), and a `train` folder additionally holds the run identity that
+`train` itself checks on resume.
+
+Why an explicit loop over cells rather than a Hydra multirun: the cells form a graph (a degraded scene
+before its training, a training before its evaluations) and some cells fail for a reason that is a
+finding (a navmesh too broken for episodes); a loop with a done-manifest records that, skips finished
+cells on restart and runs in one process on a laptop. Each `train` cell is nevertheless exactly the
+`train` command with `study.train` overrides, so any cell can be re-run or swept by hand.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.compose.study_config import POLICY_PHASES, StudyConfig, StudyGroup
+
+log = logging.getLogger("wanderland_nav.study")
+
+GROUNDED = "grounded"
+MANIFEST = "done.json"
+
+
+@dataclass(frozen=True)
+class Cell:
+    kind: str  # build | init | train | eval
+    env: str  # the environment the cell works in: "grounded" or a degradation preset
+    seed: int  # the training seed (the degradation seed for `build`)
+    policy: tuple[str, str] | None = None  # eval: (environment trained in, phase in POLICY_PHASES)
+    needs: tuple[str, ...] = field(default=(), compare=False)  # keys of cells that must be done first
+
+    @property
+    def key(self) -> str:
+        what = f"{self.kind}/{self.env}/seed{self.seed}"
+        return what if self.policy is None else f"{what}/{self.policy[0]}:{self.policy[1]}"
+
+    def folder_name(self, digest: str) -> str:
+        pol = "" if self.policy is None else f"_{self.policy[0]}-{self.policy[1].replace('+', '_')}"
+        return f"{self.env}{pol}_seed{self.seed}_{digest[:8]}"
+
+
+def _producer(policy: tuple[str, str], seed: int) -> str:
+    """The key of the cell whose folder holds `policy`'s checkpoint."""
+    env, phase = policy
+    return Cell("init", GROUNDED, seed).key if phase == "untrained" else Cell("train", env, seed).key
+
+
+def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int) -> Cell:
+    needs = (_producer(policy, seed),) + (() if env == GROUNDED else (Cell("build", env, degrade_seed).key,))
+    return Cell("eval", env, seed, policy, needs)
+
+
+def plan_cells(s: StudyGroup) -> list[Cell]:
+    """Every cell in run order: builds; then per seed the untrained init, the grounded training and the
+    fixed (grounded-trained) policies in the grounded environment; then per degraded environment the
+    fixed policies in it (its Fig.-8 column), its own training and that policy in the grounded
+    environment (its Table-3 rows), so a study cut short has whole environments, not half of each."""
+    if len(set(s.presets)) != len(s.presets) or GROUNDED in s.presets:
+        raise ValueError(f"study.presets={s.presets}: names must be distinct and not {GROUNDED!r}")
+    for what, phases, allowed in (("fixed_policies", s.fixed_policies, POLICY_PHASES),
+                                  ("table3_phases", s.table3_phases, POLICY_PHASES[1:])):
+        bad = [p for p in phases if p not in allowed]
+        if bad:
+            raise ValueError(f"study.{what}: {bad} not among {', '.join(allowed)}")
+    cells = [Cell("build", p, s.degrade_seed) for p in s.presets]
+    for seed in s.seeds:
+        cells += [Cell("init", GROUNDED, seed), Cell("train", GROUNDED, seed)]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.table3_phases
+                  if ph not in s.fixed_policies]
+        for env in s.presets:
+            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
+            cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
+            cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
+        if "untrained" not in s.fixed_policies:  # the Table-3 reference row
+            cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s.degrade_seed))
+    return cells
+
+
+def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
+    """What a cell's result depends on besides the cells it needs (hashed into its folder name)."""
+    s = c.study
+    source = {"path": c.source.path, "demo": c.source.demo, "seed": c.source.demo_seed, "preset": c.source.demo_preset}
+    if cell.kind == "build":
+        from wanderland_nav.degrade import preset
+
+        return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
+    if cell.kind in ("init", "train"):
+        return {"source": source, "train": list(s.train), "device": c.device}
+    return {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train)}
+
+
+def cell_digests(c: StudyConfig, cells: list[Cell]) -> dict[str, str]:
+    """key -> sha256 of (key, inputs, digests of the cells it needs); `cells` in dependency order."""
+    out: dict[str, str] = {}
+    for cell in cells:
+        missing = [n for n in cell.needs if n not in out]
+        if missing:
+            raise ValueError(f"cell {cell.key} needs {missing}, which are not planned before it")
+        blob = json.dumps([cell.key, cell_inputs(c, cell), [out[n] for n in cell.needs]], sort_keys=True)
+        out[cell.key] = hashlib.sha256(blob.encode()).hexdigest()
+    return out
+
+
+class Manifest:
+    """`<out>/done.json`: key -> {hash, status (done | failed | blocked), dir, seconds, info | error}.
+    Rewritten atomically after every cell, so a killed study loses at most the cell it was running."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.entries: dict[str, dict] = json.loads(self.path.read_text()) if self.path.is_file() else {}
+
+    def status(self, key: str, digest: str) -> str | None:
+        e = self.entries.get(key)
+        return e["status"] if e is not None and e.get("hash") == digest else None
+
+    def record(self, key: str, entry: dict) -> None:
+        self.entries[key] = entry
+        atomic_write_json(self.path, self.entries)
+
+
+def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path], dict], out: Path) -> Manifest:
+    """Run every cell not done yet (with this hash) whose needs are done; `execute(cell, folder) -> info`.
+
+    A cell that raises is recorded as failed with its error and the study goes on (its dependants are
+    recorded as blocked); a failed cell is not retried on restart unless `study.retry_failed`."""
+    digests = cell_digests(c, cells)
+    manifest = Manifest(out / MANIFEST)
+    for cell in cells:
+        h = digests[cell.key]
+        status = manifest.status(cell.key, h)
+        if status == "done" or (status == "failed" and not c.study.retry_failed):
+            log.info("cell %s: %s, skipped", cell.key, status)
+            continue
+        folder = out / "cells" / cell.kind / cell.folder_name(h)
+        blocked = [n for n in cell.needs if manifest.status(n, digests[n]) != "done"]
+        if blocked:
+            log.warning("cell %s: blocked by %s", cell.key, blocked)
+            manifest.record(cell.key, {"hash": h, "status": "blocked", "dir": str(folder), "blocked_by": blocked})
+            continue
+        log.info("cell %s -> %s", cell.key, folder)
+        t0 = time.perf_counter()
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            entry = {"status": "done", "info": execute(cell, folder)}
+        except Exception as e:  # recorded, reported in table.txt; the other cells still run
+            log.error("cell %s failed:\n%s", cell.key, traceback.format_exc())
+            entry = {"status": "failed", "error": f"{type(e).__name__}: {e}"}
+        manifest.record(cell.key, {"hash": h, "dir": str(folder), "seconds": round(time.perf_counter() - t0, 1),
+                                   **entry})
+    return manifest

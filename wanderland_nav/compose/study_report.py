@@ -1,0 +1,61 @@
+"""The study's outputs from its done-manifest: `table.txt` (cell status, episodes per environment, the
+Table-3 and Fig.-8 analogues with intervals), `fig8.png` and `meshes.rrd` (grounded and degraded
+collision meshes side by side). Rebuilt from whatever cells are done, so a partial study still reports
+what it has, and says which cells failed or are blocked and why."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from wanderland_nav.atomic import atomic_write_text
+from wanderland_nav.compose.study_config import StudyConfig
+from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.compose.study_cells import eval_records
+from wanderland_nav.degrade.crosseval import fig8, table3
+
+log = logging.getLogger("wanderland_nav.study")
+
+
+def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> list[str]:
+    """Counts per status, then one line per cell that is not done (with its error), and the episodes
+    each environment's navmesh yielded (a broken navmesh shows up here)."""
+    status = {c.key: manifest.status(c.key, digests[c.key]) or "not run" for c in cells}
+    counts = {s: sum(v == s for v in status.values()) for s in dict.fromkeys(status.values())}
+    lines = ["cells: " + ", ".join(f"{n} {s}" for s, n in counts.items()) + f" (of {len(cells)})"]
+    for c in cells:
+        e = manifest.entries.get(c.key, {})
+        if status[c.key] in ("failed", "blocked"):
+            lines.append(f"  {status[c.key]}: {c.key}: {e.get('error') or 'needs ' + ', '.join(e.get('blocked_by', []))}")
+        if c.kind == "train" and status[c.key] == "done":
+            info = e["info"]
+            ppo = info.get("ppo_policy_updates")
+            lines.append(f"  episodes in {c.env} (seed {c.seed}): {info['episodes']} of {info['asked']} asked, "
+                         f"trained in {e['seconds']:.0f}s" + ("" if ppo is None else f", {ppo} PPO policy updates"))
+    return lines
+
+
+def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: Manifest, meshes: dict[str, Path],
+                        header: str) -> dict[str, Path]:
+    """Write table.txt, fig8.png (when any Fig.-8 estimate exists) and meshes.rrd; -> what was written."""
+    from wanderland_nav.viz.rerun_side_by_side import write_side_by_side
+    from wanderland_nav.viz.study_chart import write_study_chart
+
+    s = c.study
+    digests = cell_digests(c, cells)
+    records = eval_records(manifest, cells, digests)
+    envs = [GROUNDED, *s.presets]
+    f8_text, chart = fig8(records, envs, s.fixed_policies, s.seeds, metric=s.rank_metric,
+                          resamples=s.bootstrap_resamples)
+    text = "\n\n".join([header, "\n".join(cell_status_lines(manifest, cells, digests)),
+                        table3(records, envs, s.seeds), f8_text])
+    written = {"table": out / "table.txt"}
+    atomic_write_text(written["table"], text + "\n")
+    if any(chart.values()):
+        written["chart"] = write_study_chart(out / "fig8.png", chart, title=header.splitlines()[0])
+    present = {k: p for k, p in meshes.items() if Path(p).is_file()}
+    if present:
+        written["recording"] = out / "meshes.rrd"
+        write_side_by_side(written["recording"], present)
+    print(text, flush=True)
+    return written

@@ -1,0 +1,70 @@
+"""Degraded copies of LiDAR-only scenes (v2 `lidar/*.bin` scans + `lidar/poses.txt`, e.g. the KITTI street).
+
+Such a scene has no camera model: its capture trajectory is the LiDAR's (`poses.txt`, world_from_sensor
+per scan) and every return is registered by the pose of the scan it belongs to. So the pose-error field
+(`poses.PoseCorrection`, drawn on the sensor positions) moves each scan rigidly with its own pose:
+
+    world' = s (R_i (T_i p - c_i) + c_i + t_i) = (R_i R_sensor_i) (s p) + s (c_i + t_i)
+
+i.e. the new pose is `corr.apply_poses(T_i)` and the scan's own points are multiplied by the scale s
+(a metric sensor seen through a non-metric trajectory), as is `lidar_min_range` in `scene_meta.json`
+(`build._meta`).
+Holes and dropped fragments are cut on the grounded world positions of all scans together and then
+removed from each scan. Splat-derived geometry needs a 3DGS and is refused: not applicable here.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from wanderland_nav.atomic import atomic_path
+
+from .damage import fragment_mask, hole_mask, horizontal_xy
+from .poses import PoseCorrection
+from .spec import DegradeSpec
+
+
+def lidar_scans(src: Path) -> list[Path]:
+    """The KITTI `.bin` scans of a LiDAR-only scene, in name order (the order of `poses.txt` lines)."""
+    files = sorted(p for p in (src / "lidar").iterdir() if p.is_file() and p.suffix.lower() in
+                   (".bin", ".ply", ".las", ".laz"))
+    other = [p.name for p in files if p.suffix.lower() != ".bin"]
+    if other:
+        raise ValueError(f"{src / 'lidar'}: degraded LiDAR-only builds read KITTI .bin scans; {other} are not")
+    return files
+
+
+def write_lidar_only(src: Path, dst: Path, scene, spec: DegradeSpec, corr: PoseCorrection,
+                     rng: np.random.Generator) -> dict:
+    """Write `dst/lidar/*.bin`, `dst/lidar/poses.txt` and copy the other top-level files; -> figures."""
+    from wanderland_nav.scene.pointcloud import read_kitti_bin
+
+    if spec.geometry == "splats":
+        raise ValueError(f"{src}: preset {spec.name!r} is not applicable to a LiDAR-only scene: splat-derived "
+                         "collision geometry needs a 3D Gaussian splat (3dgs.ply) rendered from camera poses")
+    files = lidar_scans(src)
+    T = np.asarray(scene.lidar_poses, dtype=np.float64)  # [K,4,4] world_from_sensor
+    scans = [read_kitti_bin(f) for f in files]  # [N_i,4] float32 x y z intensity, sensor frame
+    world = np.concatenate([s[:, :3].astype(np.float64) @ T[i, :3, :3].T + T[i, :3, 3] for i, s in enumerate(scans)])
+    xy = horizontal_xy(world, scene.up_axis)
+    keep_h, n_holes = hole_mask(xy, rng, spec.hole_rate_per_100m2, spec.hole_radius)
+    keep_f, n_tiles = fragment_mask(xy, rng, spec.fragment_drop_rate, spec.fragment_tile)
+    keep = np.split(keep_h & keep_f, np.cumsum([len(s) for s in scans])[:-1])
+    (dst / "lidar").mkdir(parents=True)
+    for f, scan, k in zip(files, scans, keep):
+        out = scan[k].copy()
+        out[:, :3] *= np.float32(corr.scale)
+        with atomic_path(dst / "lidar" / f.name) as tmp:
+            out.astype("<f4").tofile(tmp)
+    poses = corr.apply_poses(T)[:, :3, :].reshape(len(T), 12)
+    with atomic_path(dst / "lidar" / "poses.txt") as tmp:
+        np.savetxt(tmp, poses, fmt="%.9e")
+    for p in sorted(src.iterdir()):  # e.g. other metadata; prepared artefacts and plots are rebuilt / dropped
+        if p.is_file() and p.name != "scene_meta.json" and p.suffix.lower() in (".json", ".txt", ".yaml") \
+                and not p.name.startswith(("collision_mesh", "navmesh", "episodes", ".")):
+            shutil.copy2(p, dst / p.name)
+    return {"points_in": int(len(world)), "points_kept": int(sum(k.sum() for k in keep)), "holes": n_holes,
+            "fragments_dropped": n_tiles, "lidar_points": int(len(world)), "scans": len(files)}

@@ -1,0 +1,53 @@
+"""The grounding study's Fig.-8-like bar chart: SR and IR of fixed policies in each environment.
+
+One panel per metric; a group of bars per environment (grounded first), one bar per policy, with the
+95 % interval of each estimate as its error bar. Input is plain estimates (`value`, `low`, `high`), so
+the chart knows nothing about how they were computed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+from wanderland_nav.atomic import atomic_path
+
+
+def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[str, object]]],
+                      title: str = "") -> Path:
+    """`chart`: metric -> env -> policy -> estimate with `.value/.low/.high`. Writes a PNG at `out`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    metrics = [m for m, per_env in chart.items() if per_env]
+    if not metrics:
+        raise ValueError(f"{out}: no estimates to draw")
+    envs = list(dict.fromkeys(e for m in metrics for e in chart[m]))
+    policies = list(dict.fromkeys(p for m in metrics for e in chart[m].values() for p in e))
+    width = 0.8 / max(len(policies), 1)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(max(5.0, 1.3 * len(envs)) * len(metrics) / 1.4, 3.6),
+                             squeeze=False)
+    for ax, m in zip(axes[0], metrics):
+        x = np.arange(len(envs))
+        for k, pol in enumerate(policies):
+            est = [chart[m].get(env, {}).get(pol) for env in envs]
+            val = np.array([e.value if e is not None else np.nan for e in est])
+            err = np.array([[e.value - e.low, e.high - e.value] if e is not None else [0, 0] for e in est]).T
+            ax.bar(x + (k - (len(policies) - 1) / 2) * width, val, width, yerr=err, capsize=3, label=pol,
+                   color=f"C{k}")
+        ax.set_xticks(x, envs, rotation=25, ha="right", fontsize=8)
+        ax.set_ylim(0, 1)
+        ax.set_title(f"{m} (95 % CI)")
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="upper right")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    out = Path(out)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    return out
