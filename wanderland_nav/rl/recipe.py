@@ -77,6 +77,10 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
 
     evaluate(r.first_row, 0)
     rows = [r.first_row]
+    # one train env for BC and a single-process PPO collector: building a NavEnv builds the geodesic raster
+    # of every train goal (~0.6 CPU-s each on the demo), so a second construction is pure waste
+    share_env = r.bc_env_fn in (None, r.env_fn) and r.num_workers <= 1 and r.ray is None
+    train_env = None
     if r.bc is not None:
         if phase in ("bc_done", "ppo", "ppo_done"):
             r.policy.load_state_dict(state["policy"])
@@ -85,7 +89,9 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
             train_env = (r.bc_env_fn or r.env_fn)()
             paths = ExpertPaths.from_episodes(train_env.episodes, r.nav_from_scene)
             stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed, progress=r.progress)
-            train_env.close()
+            if not (share_env and r.ppo is not None):
+                train_env.close()
+                train_env = None
             bc_kw = dict(policy=r.policy, optimizer=None, counters={"bc_updates": r.bc.updates_per_round},
                          phase="bc_done", extra={"bc": stats}, **save_kw)
             save_checkpoint(ckpt.dir / "bc.pt", **bc_kw)  # kept: PPO overwrites last.pt; init_checkpoint=<this>
@@ -94,7 +100,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         evaluate("BC", 0)
         rows.append("BC")
     if r.ppo is not None:
-        trainer = PPOTrainer(r.policy, r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
+        trainer = PPOTrainer(r.policy, train_env if train_env is not None else r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
                              ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
