@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -52,6 +53,16 @@ def _load_results(path: Path, state, identity_hash: str) -> dict:
     return {k: v for k, v in rows.items() if v.get("identity") == identity_hash}
 
 
+@contextmanager
+def _timed(times: dict[str, float], name: str):
+    """Adds the block's wall seconds to `times[name]` (the per-phase budget line at the end of a run)."""
+    t = time.perf_counter()
+    try:
+        yield
+    finally:
+        times[name] = times.get(name, 0.0) + time.perf_counter() - t
+
+
 def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     """-> (results {row: {"summary", "records", "seconds", "identity"}}, rows in table order)."""
     ckpt = Checkpointer(r.run_dir / "checkpoints")
@@ -60,13 +71,15 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     results = _load_results(results_path, state, r.identity["hash"])
     phase = state.get("phase") if state else None
     save_kw = dict(config={**r.config, "identity": r.identity})
+    times: dict[str, float] = {}
 
     def evaluate(name: str, step: int) -> None:
         if name in results:
             return
         r.policy.eval()
         t = time.perf_counter()
-        res = r.evaluate(name, r.policy, r.eval_env, step)
+        with _timed(times, f"eval {name}"):
+            res = r.evaluate(name, r.policy, r.eval_env, step)
         results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
                          "identity": r.identity["hash"], "frames": step}
         atomic_write_json(results_path, results)
@@ -86,9 +99,12 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
             r.policy.load_state_dict(state["policy"])
             log.info("BC already done; loaded its weights")
         else:
-            train_env = (r.bc_env_fn or r.env_fn)()
+            with _timed(times, "train env"):
+                train_env = (r.bc_env_fn or r.env_fn)()
             paths = ExpertPaths.from_episodes(train_env.episodes, r.nav_from_scene)
-            stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed, progress=r.progress)
+            with _timed(times, "BC"):
+                stats = train_bc(r.policy, train_env, paths, r.bc, logger=r.logger, seed=r.seed,
+                                 progress=r.progress)
             if not (share_env and r.ppo is not None):
                 train_env.close()
                 train_env = None
@@ -105,10 +121,12 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)
-        trainer.train()
+        with _timed(times, "PPO"):  # includes building the train env when BC did not leave one
+            trainer.train()
         name = "BC+RL" if r.bc is not None else "RL"
         evaluate(name, trainer.frames)
         rows.append(name)
     if r.ppo is None and r.bc is None and state is None:
         save_checkpoint(ckpt.last, policy=r.policy, optimizer=None, counters={}, phase="done", **save_kw)
+    log.info("phase wall seconds: %s", ", ".join(f"{k} {v:.0f}" for k, v in times.items()))
     return results, rows
