@@ -197,6 +197,13 @@ class NavPolicy(TensorDictModuleBase):
         td.set(K.STATE_VALUE, self.value_head(self.pooled(feats)).view(*lead, 1))
         return td
 
+    @torch.no_grad()
+    def value_features(self, td: TensorDictBase) -> torch.Tensor:
+        """`[N, feature_dim]` trunk readout features, flattened over the batch dims, without gradients: what
+        PPO's own critic (`wanderland_nav.rl.critic`) reads beside its own observations."""
+        obs, _ = self._gather(td)
+        return self.pooled(self.encode(obs))
+
     def dist(self, td: TensorDictBase) -> WaypointNormal:
         out = self(td.copy())
         return WaypointNormal(out.get(K.LOC), out.get(K.SCALE))

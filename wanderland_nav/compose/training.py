@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from functools import partial
 from pathlib import Path
 
@@ -107,7 +108,9 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
+    t = time.perf_counter()
     eval_env, env_fn, bc_env_fn = envs(env_cfg)
+    log.info("eval env built in %.1fs", time.perf_counter() - t)
     logger = make_logger(c.logger, run_dir, scene)
     first = "untrained"
     if c.init_checkpoint:

@@ -8,10 +8,10 @@ The loop (`PPOTrainer.train`) reads top to bottom like a CleanRL/TorchRL recipe:
         log train/ losses/ time/ ; checkpoint atomically ; update collector weights
 
 The actor is the policy wrapped in a `ProbabilisticActor` with `WaypointNormal` (independent Normal over
-the `[K, 2]` waypoints; see `policies.base`). The critic is the policy's value head on no-grad trunk
-features (`NavPolicy.value`, trunk under `no_grad`), so the critic loss only reaches the value head and
-never the shared trunk. (`separate_losses` must stay False: the critic wraps the whole policy module, so
-TorchRL would treat *every* critic parameter as shared with the actor and detach the value head too.)
+the `[K, 2]` waypoints; see `policies.base`). The critic is its own network (`rl/critic.py`: the policy's
+detached readout features + final-goal features + the episode clock, PopArt-normalised targets), fitted
+for `critic_epochs` passes per batch on inputs computed once; the policy's `value_head` is not used here.
+The actor's learning rate anneals linearly to 0 over `total_frames` (`anneal_lr`, as CleanRL's PPO).
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from typing import Callable
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import TensorDictModuleBase
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.envs import EnvBase
 from torchrl.modules import ProbabilisticActor
@@ -35,6 +34,7 @@ from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
 from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
+from wanderland_nav.rl.critic import NavCritic, explained_variance, fit_critic
 from wanderland_nav.rl.loggers import Logger
 
 log = logging.getLogger(__name__)
@@ -52,11 +52,14 @@ class PPOConfig:
     lmbda: float = 0.95
     clip_epsilon: float = 0.2
     entropy_coeff: float = 0.0
-    critic_coeff: float = 0.5
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
-    critic_warmup_iters: int = 0       # first iterations update only the value head (see PPOTrainer.update)
+    critic_warmup_iters: int = 0       # first iterations update only the critic (see PPOTrainer.update)
+    critic_epochs: int = 10            # passes of the critic over each batch (cached inputs: cheap)
+    critic_hidden: int = 256
+    critic_horizon: float = 100.0      # the critic's clock input is step_count / this (a scale, not a limit)
+    anneal_lr: bool = True             # actor lr: linear to 0 over total_frames
 
     def __post_init__(self):
         if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
@@ -64,19 +67,6 @@ class PPOConfig:
                              f"({self.total_frames})")
         if not 0 < self.minibatch_size <= self.frames_per_batch:
             raise ValueError(f"PPO: minibatch_size={self.minibatch_size} must be in (0, frames_per_batch]")
-
-
-class ValueModule(TensorDictModuleBase):
-    """The critic: `policy.value(td)` (value head over no-grad trunk features) as a TensorDict module."""
-
-    def __init__(self, policy: NavPolicy):
-        super().__init__()
-        self.policy = policy
-        self.in_keys = list(policy.in_keys)
-        self.out_keys = [K.STATE_VALUE]
-
-    def forward(self, td: TensorDictBase) -> TensorDictBase:
-        return self.policy.value(td)
 
 
 def make_actor(policy: NavPolicy) -> ProbabilisticActor:
@@ -93,7 +83,8 @@ def make_actor(policy: NavPolicy) -> ProbabilisticActor:
 
 def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: int, total_frames: int,
                    num_workers: int = 1, seed: int = 0, ray: dict | None = None):
-    """One process (`Collector`) or `num_workers` synchronous processes (`MultiSyncCollector`); with `ray`
+    """One process (`Collector`; `env_fn` may then be an env already built, e.g. BC's) or `num_workers`
+    synchronous processes (`MultiSyncCollector`, `env_fn` a picklable factory); with `ray`
     (the `collector=ray` options) `num_workers` Ray actors (`wanderland_nav.rl.ray_collector`)."""
     if ray is not None:
         from wanderland_nav.rl.ray_collector import make_ray_collector
@@ -146,7 +137,7 @@ def episode_stats(batch: TensorDictBase) -> dict[str, float]:
 class PPOTrainer:
     """Owns the actor, critic, loss, optimiser and the loop; resumes from `checkpointer.last`."""
 
-    def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase], cfg: PPOConfig, *,
+    def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase] | EnvBase, cfg: PPOConfig, *,
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
                  seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
@@ -156,21 +147,17 @@ class PPOTrainer:
         if policy.config.freeze_encoder != "never":  # "rl" (the paper: update only the policy) or "always"
             policy.freeze_encoders(True)
         self.actor = make_actor(policy)
-        self.critic = ValueModule(policy)
-        self.loss = ClipPPOLoss(self.actor, self.critic, clip_epsilon=cfg.clip_epsilon,
+        self.critic = NavCritic(policy, hidden=cfg.critic_hidden, horizon=cfg.critic_horizon)
+        self.loss = ClipPPOLoss(self.actor, None, clip_epsilon=cfg.clip_epsilon,  # actor only: see rl/critic.py
                                 entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
-                                critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
-                                normalize_advantage=cfg.normalize_advantage, separate_losses=False)
+                                critic_coeff=None, normalize_advantage=cfg.normalize_advantage)
         self.loss.set_keys(action=K.ACTION, sample_log_prob=K.ACTION_LOG_PROB, value=K.STATE_VALUE,
                            reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
-        self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=self.critic, average_gae=False,
-                       deactivate_vmap=True)  # conv + GroupNorm are not vmap-able
+        self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=None, average_gae=False)  # values given
         self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
-        head = {id(p) for p in policy.value_head.parameters()}
-        self.optim = torch.optim.Adam([
-            {"params": [p for p in policy.trainable_parameters() if id(p) not in head], "lr": cfg.lr},
-            {"params": list(policy.value_head.parameters()), "lr": cfg.critic_lr},
-        ])
+        head = {id(p) for p in policy.value_head.parameters()}  # the policy's own head: not PPO's critic
+        self.optim = torch.optim.Adam([p for p in policy.trainable_parameters() if id(p) not in head], lr=cfg.lr)
+        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
         self.iteration, self.frames = 0, 0
 
     # -------------------------------------------------------------- checkpoints
@@ -179,13 +166,19 @@ class PPOTrainer:
 
     def save(self, phase: str = "ppo") -> None:
         if self.checkpointer is not None:
+            critic = {"critic": self.critic.state_dict(), "critic_optimizer": self.critic_optim.state_dict()}
             self.checkpointer.save(self.iteration, policy=self.policy, optimizer=self.optim,
-                                   counters=self.state_counters(), config=self.config_dict, phase=phase)
+                                   counters=self.state_counters(), config=self.config_dict, phase=phase,
+                                   extra=critic)
 
     def restore(self, ckpt: dict) -> None:
         self.policy.load_state_dict(ckpt["policy"])
         if ckpt.get("optimizer") is not None and ckpt.get("phase") in ("ppo", "ppo_done"):
             self.optim.load_state_dict(ckpt["optimizer"])
+            extra = ckpt.get("extra") or {}
+            if "critic" in extra:
+                self.critic.load_state_dict(extra["critic"])
+                self.critic_optim.load_state_dict(extra["critic_optimizer"])
         self.iteration = int(ckpt["counters"].get("ppo_iteration", 0))
         self.frames = int(ckpt["counters"].get("ppo_frames", 0))
         if ckpt.get("rng") is not None:
@@ -193,55 +186,61 @@ class PPOTrainer:
 
     # -------------------------------------------------------------- one update
     def update(self, batch: TensorDictBase) -> dict[str, float]:
-        """GAE then minibatch epochs of ClipPPOLoss. During the first `critic_warmup_iters` iterations only
-        the critic loss is applied: a fresh value head gives near-random advantages, and policy-gradient
-        steps on them would move a behaviour-cloned policy away from its demonstrations for nothing."""
+        """Critic values -> GAE -> actor epochs (ClipPPOLoss, target-KL stop) -> critic epochs. During the first
+        `critic_warmup_iters` iterations the actor is left alone: a fresh critic gives near-random advantages,
+        and policy-gradient steps on them would move a behaviour-cloned policy away from its demonstrations."""
         cfg = self.cfg
         warmup = self.iteration < cfg.critic_warmup_iters
-        # the actor also wrote STATE_VALUE at the root (not in "next"): drop it so GAE recomputes both
-        batch = batch.exclude(K.STATE_VALUE)
+        batch = batch.exclude(K.STATE_VALUE)  # the policy's own value head wrote one: PPO's critic replaces it
+        x, x_next = self.critic.inputs(batch), self.critic.inputs(batch.get("next"))  # [B, T, F], trunk once
         with torch.no_grad():
+            batch.set(K.STATE_VALUE, self.critic(x))
+            batch.get("next").set(K.STATE_VALUE, self.critic(x_next))
             self.gae(batch)
         flat = batch.reshape(-1)
-        n = flat.shape[0]
-        sums: dict[str, float] = {}
-        count = 0
-        stop = False
+        adv, target, value = flat.get("advantage"), flat.get("value_target"), flat.get(K.STATE_VALUE)
+        self._check_finite({"advantage": adv, "value_target": target}, ("advantage", "value_target"), 0, 0)
+        res = {"losses/explained_variance": explained_variance(value, target),  # of the critic that made the GAE
+               "losses/advantage_mean": float(adv.mean()), "losses/advantage_std": float(adv.std()),
+               "losses/value_target_mean": float(target.mean()), "losses/critic_warmup": float(warmup)}
+        if cfg.anneal_lr:
+            self.optim.param_groups[0]["lr"] = cfg.lr * max(0.0, 1.0 - self.frames / cfg.total_frames)
+        res["losses/lr"] = self.optim.param_groups[0]["lr"]
+        if not warmup:
+            res.update(self._actor_epochs(flat))
+        xf = x.reshape(-1, x.shape[-1])
+        res["losses/critic"] = fit_critic(self.critic, self.critic_optim, xf, target, epochs=cfg.critic_epochs,
+                                          minibatch_size=cfg.minibatch_size, max_grad_norm=cfg.max_grad_norm)
+        with torch.no_grad():
+            res["losses/explained_variance_after_fit"] = explained_variance(self.critic(xf), target)
+        res["losses/std_mean"] = float(self.policy.scale().detach().mean())
+        return res
+
+    def _actor_epochs(self, flat: TensorDictBase) -> dict[str, float]:
+        """Minibatch epochs of the clipped objective (+ entropy); stop the batch beyond `target_kl`."""
+        cfg = self.cfg
+        n, sums, count, epoch = flat.shape[0], {}, 0, 0
         for epoch in range(cfg.epochs):
             perm = torch.randperm(n)
             for start in range(0, n - cfg.minibatch_size + 1, cfg.minibatch_size):
-                mb = flat[perm[start:start + cfg.minibatch_size]]
-                out = self.loss(mb)
-                terms = ("loss_critic",) if warmup else ("loss_objective", "loss_critic", "loss_entropy")
+                out = self.loss(flat[perm[start:start + cfg.minibatch_size]])
+                terms = [t for t in ("loss_objective", "loss_entropy") if t in out.keys()]
                 self._check_finite(out, terms, epoch, start // cfg.minibatch_size)
-                total = sum(out[t] for t in terms if t in out.keys())
                 self.optim.zero_grad(set_to_none=True)
-                total.backward()
+                sum(out[t] for t in terms).backward()
                 gn = torch.nn.utils.clip_grad_norm_(self.policy.trainable_parameters(), cfg.max_grad_norm)
                 self._check_finite({"grad_norm": gn}, ("grad_norm",), epoch, start // cfg.minibatch_size)
                 self.optim.step()
-                stats = {
-                    "losses/objective": out["loss_objective"], "losses/critic": out["loss_critic"],
-                    "losses/approx_kl": out["kl_approx"], "losses/clipfrac": out["clip_fraction"],
-                    "losses/grad_norm": gn,
-                }
-                for key, name in (("explained_variance", "explained_variance"), ("entropy", "entropy")):
-                    if key in out.keys():
-                        stats[f"losses/{name}"] = out[key]
+                stats = {"losses/objective": out["loss_objective"], "losses/approx_kl": out["kl_approx"],
+                         "losses/clipfrac": out["clip_fraction"], "losses/grad_norm": gn}
+                if "entropy" in out.keys():
+                    stats["losses/entropy"] = out["entropy"]
                 for k, v in stats.items():
                     sums[k] = sums.get(k, 0.0) + float(torch.as_tensor(v).detach().float().mean())
                 count += 1
-                if (not warmup and cfg.target_kl is not None
-                        and float(out["kl_approx"].detach().abs().mean()) > cfg.target_kl):
-                    stop = True
-                    break
-            if stop:
-                break
-        res = {k: v / max(count, 1) for k, v in sums.items()}
-        res["losses/epochs_done"] = epoch + 1
-        res["losses/critic_warmup"] = float(warmup)
-        res["losses/std_mean"] = float(self.policy.scale().detach().mean())
-        return res
+                if cfg.target_kl is not None and float(out["kl_approx"].detach().abs().mean()) > cfg.target_kl:
+                    return {**{k: v / count for k, v in sums.items()}, "losses/epochs_done": epoch + 1}
+        return {**{k: v / max(count, 1) for k, v in sums.items()}, "losses/epochs_done": epoch + 1}
 
     def _check_finite(self, values, names, epoch: int, minibatch: int) -> None:
         """Stop before a non-finite loss or gradient reaches the weights: the optimiser has not stepped,

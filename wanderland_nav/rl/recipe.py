@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -53,6 +54,16 @@ def _load_results(path: Path, state, identity_hash: str) -> dict:
     return {k: v for k, v in rows.items() if v.get("identity") == identity_hash}
 
 
+@contextmanager
+def _timed(times: dict[str, float], name: str):
+    """Adds the block's wall seconds to `times[name]` (the per-phase budget line at the end of a run)."""
+    t = time.perf_counter()
+    try:
+        yield
+    finally:
+        times[name] = times.get(name, 0.0) + time.perf_counter() - t
+
+
 def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     """-> (results {row: {"summary", "records", "seconds", "identity"}}, rows in table order)."""
     ckpt = Checkpointer(r.run_dir / "checkpoints")
@@ -61,13 +72,15 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     results = _load_results(results_path, state, r.identity["hash"])
     phase = state.get("phase") if state else None
     save_kw = dict(config={**r.config, "identity": r.identity})
+    times: dict[str, float] = {}
 
     def evaluate(name: str, step: int) -> None:
         if name in results:
             return
         r.policy.eval()
         t = time.perf_counter()
-        res = r.evaluate(name, r.policy, r.eval_env, step)
+        with _timed(times, f"eval {name}"):
+            res = r.evaluate(name, r.policy, r.eval_env, step)
         results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
                          "identity": r.identity["hash"], "frames": step}
         atomic_write_json(results_path, results)
@@ -78,15 +91,23 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
 
     evaluate(r.first_row, 0)
     rows = [r.first_row]
+    # one train env for BC and a single-process PPO collector: building a NavEnv builds the geodesic raster
+    # of every train goal (~0.6 CPU-s each on the demo), so a second construction is pure waste
+    share_env = r.bc_env_fn in (None, r.env_fn) and r.num_workers <= 1 and r.ray is None
+    train_env = None
     if r.bc is not None:
         if phase in ("bc_done", "ppo", "ppo_done"):
             r.policy.load_state_dict(state["policy"])
             log.info("BC already done; loaded its weights")
         else:
-            train_env = (r.bc_env_fn or r.env_fn)()
-            stats = behaviour_cloning(r.policy, train_env, r.nav_from_scene, r.bc, logger=r.logger, seed=r.seed,
-                                      progress=r.progress)
-            train_env.close()
+            with _timed(times, "train env"):
+                train_env = (r.bc_env_fn or r.env_fn)()
+            with _timed(times, "BC"):  # every scene of a set: rl.scene_sets.behaviour_cloning
+                stats = behaviour_cloning(r.policy, train_env, r.nav_from_scene, r.bc, logger=r.logger, seed=r.seed,
+                                          progress=r.progress)
+            if not (share_env and r.ppo is not None):
+                train_env.close()
+                train_env = None
             bc_kw = dict(policy=r.policy, optimizer=None, counters={"bc_updates": r.bc.updates_per_round},
                          phase="bc_done", extra={"bc": stats}, **save_kw)
             save_checkpoint(ckpt.dir / "bc.pt", **bc_kw)  # kept: PPO overwrites last.pt; init_checkpoint=<this>
@@ -95,15 +116,17 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         evaluate("BC", 0)
         rows.append("BC")
     if r.ppo is not None:
-        trainer = PPOTrainer(r.policy, r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
+        trainer = PPOTrainer(r.policy, train_env if train_env is not None else r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
                              ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)
-        trainer.train()
+        with _timed(times, "PPO"):  # includes building the train env when BC did not leave one
+            trainer.train()
         name = "BC+RL" if r.bc is not None else "RL"
         evaluate(name, trainer.frames)
         rows.append(name)
     if r.ppo is None and r.bc is None and state is None:
         save_checkpoint(ckpt.last, policy=r.policy, optimizer=None, counters={}, phase="done", **save_kw)
+    log.info("phase wall seconds: %s", ", ".join(f"{k} {v:.0f}" for k, v in times.items()))
     return results, rows

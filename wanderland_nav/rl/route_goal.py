@@ -21,12 +21,14 @@ from torchrl.envs import Transform, TransformedEnv
 
 from wanderland_nav import keys as K
 from wanderland_nav.rl.bc import ExpertPaths
+from wanderland_nav.rl.critic import FINAL_GOAL_VECTOR
 
 GOAL_INPUTS = ("goal", "route")
 
 
 class RouteGoal(Transform):
-    """Overwrites `GOAL_VECTOR` `[*B, 2]` and `GOAL_POSE[..., :2]` with the route point ahead (body frame, m)."""
+    """Overwrites `GOAL_VECTOR` `[*B, 2]` and `GOAL_POSE[..., :2]` with the route point ahead (body frame, m);
+    the final goal's vector stays readable as `FINAL_GOAL_VECTOR` (PPO's critic reads it, the policy does not)."""
 
     def __init__(self, paths: ExpertPaths, lookahead: float):
         super().__init__(in_keys=[K.AGENT_POSITION, K.AGENT_YAW, K.EPISODE_INDEX], out_keys=[K.GOAL_VECTOR])
@@ -45,6 +47,7 @@ class RouteGoal(Transform):
         if K.AGENT_POSITION not in td.keys(True):  # privileged keys are nested
             return td
         sub = self.route_point(td)
+        td.set(FINAL_GOAL_VECTOR, td.get(K.GOAL_VECTOR).clone())
         td.set(K.GOAL_VECTOR, sub)
         if K.GOAL_POSE in td.keys(True):
             pose = td.get(K.GOAL_POSE).clone()
@@ -56,7 +59,8 @@ class RouteGoal(Transform):
         return self._call(tensordict_reset)
 
     def transform_observation_spec(self, observation_spec):
-        return observation_spec  # same keys, shapes and dtypes
+        observation_spec[FINAL_GOAL_VECTOR] = observation_spec[K.GOAL_VECTOR].clone()
+        return observation_spec
 
 
 def with_goal_input(env, goal_input: str = "goal", lookahead: float = 3.0):
