@@ -141,6 +141,10 @@ class PPOTrainer:
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
                  seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
+        iterations = cfg.total_frames // cfg.frames_per_batch
+        if iterations <= cfg.critic_warmup_iters:  # the "RL" row would be the init policy, unchanged
+            log.warning("PPO: %d iteration(s) <= critic_warmup_iters=%d: no policy update will be made "
+                        "(raise total_frames)", iterations, cfg.critic_warmup_iters)
         self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
