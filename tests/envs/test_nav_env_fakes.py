@@ -150,7 +150,8 @@ def test_seeded_rollouts_are_reproducible_and_seeds_differ():
 
 
 def test_step_path_is_batched():
-    """One navmesh motion call and ceil(B / render_chunk) render calls per step, whatever B is."""
+    """One navmesh motion call and ceil(B / render_chunk) render calls per step, whatever B is (the
+    calls run on concurrent threads, so their order is not fixed)."""
     c = small_config()
     c.camera.render_chunk = 4
     env = make_env(B=10, config=c)
@@ -159,7 +160,7 @@ def test_step_path_is_batched():
     env.camera.renderer.calls.clear()
     td[keys.ACTION] = torch.zeros(10, 5, 2)
     env.step(td)
-    assert env.navmesh.move_calls == 1 and env.camera.renderer.calls == [4, 4, 2]
+    assert env.navmesh.move_calls == 1 and sorted(env.camera.renderer.calls) == [2, 4, 4]
 
 
 @pytest.mark.parametrize("mode", ["waypoints", "velocity"])

@@ -19,6 +19,7 @@ import torch
 
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
+from wanderland_nav.render.shards import map_single_threaded
 
 Renderer = Callable[..., object]
 """`render(gaussians, cam_from_world[C,4,4], K[C,3,3], width, height, *, render_mode, background,
@@ -32,7 +33,8 @@ def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
 
 
 class AgentCamera:
-    """Renders what agents at nav-frame poses see, `render_chunk` cameras per renderer call."""
+    """Renders what agents at nav-frame poses see, `render_chunk` cameras per renderer call, groups on
+    `workers()` threads."""
 
     def __init__(self, cfg: CameraConfig, nav_from_scene: np.ndarray, renderer: Renderer, gaussians, device):
         self.cfg = cfg
@@ -54,9 +56,18 @@ class AgentCamera:
         )
         return invert_rigid(world_from_cam)
 
+    def workers(self) -> int:
+        """Threads that render groups concurrently: `render_threads`, else torch's intra-op thread count."""
+        return self.cfg.render_threads if self.cfg.render_threads is not None else torch.get_num_threads()
+
     @torch.no_grad()
     def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
-        """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None."""
+        """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None.
+
+        The B cameras are rendered in groups of `render_chunk` (one batched renderer call each, which
+        bounds peak memory); the groups never depend on the thread count. On CPU with the eager
+        backend, `workers()` threads render them concurrently on one intra-op thread each
+        (`render.shards`): same images for any thread count."""
         B = position_nav.shape[0]
         H, W = self.cfg.height, self.cfg.width
         rgb = torch.empty(B, H, W, 3, dtype=torch.uint8, device=self.device)
@@ -67,23 +78,31 @@ class AgentCamera:
                 depth.zero_()
             return rgb, depth
         viewmats = self.cam_from_world(position_nav, yaw)
-        mode = "RGB+ED" if self.cfg.depth else "RGB"
-        extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
-        for s in range(0, B, self.cfg.render_chunk):  # chunks bound peak memory; each call is batched
-            e = min(B, s + self.cfg.render_chunk)
-            out = self.renderer(
-                self.gaussians,
-                viewmats[s:e],
-                self.K.expand(e - s, 3, 3),
-                W,
-                H,
-                render_mode=mode,
-                background=self.background,
-                camera_model=self.cfg.camera_model,
-                **extra,
-            )
-            rgb[s:e] = (out.rgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
-            if depth is not None:
-                d = out.depth if out.depth is not None else torch.zeros(e - s, H, W, 1, device=self.device)
-                depth[s:e] = torch.nan_to_num(d.float(), nan=0.0, posinf=0.0, neginf=0.0)
+        groups = [(s, min(B, s + self.cfg.render_chunk)) for s in range(0, B, self.cfg.render_chunk)]
+        render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
+        if self.device.type == "cpu" and self.cfg.render_backend == "torch":
+            map_single_threaded(render_group, groups, self.workers())
+        else:  # GPU and compiled kernels schedule their own threads
+            for g in groups:
+                render_group(g)
         return rgb, depth
+
+    def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int):
+        """Render cameras `s:e` of `viewmats [B, 4, 4]` into rows `s:e` of `rgb` / `depth` (disjoint per group)."""
+        H, W = self.cfg.height, self.cfg.width
+        extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
+        out = self.renderer(
+            self.gaussians,
+            viewmats[s:e],
+            self.K.expand(e - s, 3, 3),
+            W,
+            H,
+            render_mode="RGB+ED" if self.cfg.depth else "RGB",
+            background=self.background,
+            camera_model=self.cfg.camera_model,
+            **extra,
+        )
+        rgb[s:e] = (out.rgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
+        if depth is not None:
+            d = out.depth if out.depth is not None else torch.zeros(e - s, H, W, 1, device=self.device)
+            depth[s:e] = torch.nan_to_num(d.float(), nan=0.0, posinf=0.0, neginf=0.0)

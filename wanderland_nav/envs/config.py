@@ -33,7 +33,8 @@ class CameraConfig:
     depth: bool = False  # also emit keys.DEPTH
     history: int = 5  # T frames in keys.RGB (CityWalker: 5 context frames)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] where nothing is hit
-    render_chunk: int = 64  # cameras per render() call, bounds the renderer's peak memory
+    render_chunk: int = 16  # cameras per render() call: bounds peak memory; the groups are rendered concurrently
+    render_threads: int | None = None  # threads rendering groups (1 intra-op thread each); None: torch.get_num_threads()
     render_backend: str = "torch"  # "torch" | "compiled" (torch.compile'd hot stages) | "gsplat" (CUDA, extra)
 
 
@@ -102,6 +103,7 @@ class NavEnvConfig:
             ("camera.camera_model", c.camera_model in CAMERA_MODELS, c.camera_model),
             ("camera.history", c.history >= 1, c.history),
             ("camera.render_chunk", c.render_chunk >= 1, c.render_chunk),
+            ("camera.render_threads", c.render_threads is None or c.render_threads >= 1, c.render_threads),
             ("camera.render_backend", c.render_backend in RENDER_BACKENDS, c.render_backend),
             ("camera.background", len(c.background) == 3, c.background),
             ("kinematics.action_mode", k.action_mode in ACTION_MODES, k.action_mode),
