@@ -126,7 +126,8 @@ OBSERVATION_KEYS = (
     INSTRUCTION_TOKENS,
 )
 """Keys every policy may read (plus `DEPTH` when enabled): the env's observation spec is exactly these
-and the `PRIVILEGED` sub-spec."""
+and the `PRIVILEGED` sub-spec. With the camera off there are no images: no `RGB` / `DEPTH`, and no
+`GOAL_IMAGE` / `HAS_GOAL_IMAGE` unless the episodes' goal views were loaded."""
 
 PRIVILEGED_KEYS = (EPISODE_INDEX, STEP_COUNT, AGENT_POSITION, AGENT_YAW, DISTANCE_TO_GOAL, SUCCESS, INTERVENTION,
                    COLLISION)

@@ -233,14 +233,26 @@ def test_bad_inputs_are_named():
         env.step(td)
 
 
-def test_disabled_camera_never_renders_and_emits_zeros():
+def test_disabled_camera_never_renders_and_carries_no_images():
+    """Camera off: no renderer call and no image keys in the spec or the tensordicts (blank frames were
+    most of a blind B=256 step); goal views stay when episodes have real ones (loaded files)."""
     c = small_config()
     c.camera.enabled = False
+    c.camera.depth = True
     renderer = FakeRenderer()
     env = NavEnv(FakeScene(), make_episodes(), batch_size=[2], config=c, navmesh=FakeNavMesh(), renderer=renderer)
     check_env_specs(env)
     td = env.rollout(5, ExpertPolicy(env), break_when_any_done=False)
-    assert renderer.calls == [] and not td["next", keys.RGB].any()
+    images = {keys.RGB, keys.DEPTH, keys.GOAL_IMAGE, keys.HAS_GOAL_IMAGE}
+    assert renderer.calls == []
+    assert not images & set(env.observation_spec.keys()) and not images & set(td["next"].keys())
+    E = len(env.table)
+    views = (torch.full((E, c.camera.height, c.camera.width, 3), 7, dtype=torch.uint8), torch.ones(E, dtype=torch.bool))
+    env = NavEnv(FakeScene(), make_episodes(), batch_size=[2], config=c, navmesh=FakeNavMesh(), renderer=renderer,
+                 goal_images=views)
+    check_env_specs(env)
+    td = env.reset()
+    assert (td[keys.GOAL_IMAGE] == 7).all() and td[keys.HAS_GOAL_IMAGE].all() and keys.RGB not in td.keys()
 
 
 def test_camera_without_gaussians_is_refused_by_name():

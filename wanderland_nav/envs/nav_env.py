@@ -15,6 +15,9 @@ distance, at most 2 sqrt(2) cell sizes above it). A step whose distance is undef
 another island than its goal) keeps the last defined distance, can never succeed, and is counted. Episode-level metrics are accumulated
 per agent and handed out by `pop_finished_metrics()` for the trainer and the evaluator.
 
+With the camera off (blind or privileged agents) the env carries no image keys at all (spec and
+tensordicts), so TorchRL's resets and copies never touch blank frames.
+
 State tensors are replaced, never written in place: the tensors returned in a step's TensorDict
 may be kept by a rollout, and must not change afterwards.
 """
@@ -129,6 +132,10 @@ class NavEnv(EnvBase):
         self.step_field = self.field.raster(cache_dir=Path(navmesh_path).parent if navmesh_path else None)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
         self._init_goal_images(where, goal_images)
+        # Image keys exist only when there are images: with the camera off, blank [B, T, H, W, 3] frames
+        # were ~85 % of a B=256 step (TorchRL's reset `where` and copies over them). Fixed at construction.
+        self.carries_frames = cfg.camera.enabled
+        self.carries_goal_views = cfg.camera.enabled or bool(self._has_goal_image.any())
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
         self.shortest_length = self._shortest_lengths(where)  # [E] exact geodesic start -> goal
@@ -169,12 +176,9 @@ class NavEnv(EnvBase):
         # uint8 images as Unbounded: a Bounded spec would hold full-size low/high tensors (B*T*H*W*3 each)
         img = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
         obs = {
-            keys.RGB: img(T, H, W, 3),
             keys.PAST_POSITIONS: f32(T, 2),
             keys.GOAL_VECTOR: f32(2),
             keys.GOAL_POSE: f32(4),
-            keys.GOAL_IMAGE: img(H, W, 3),
-            keys.HAS_GOAL_IMAGE: flag(),
             keys.INSTRUCTION_TOKENS: i64(L),
             # ground truth no policy may read: nested under keys.PRIVILEGED by the keys themselves
             keys.EPISODE_INDEX: i64(1),
@@ -186,8 +190,12 @@ class NavEnv(EnvBase):
             keys.INTERVENTION: flag(),
             keys.COLLISION: flag(),
         }
-        if c.depth:
-            obs[keys.DEPTH] = f32(T, H, W, 1)
+        if self.carries_frames:
+            obs[keys.RGB] = img(T, H, W, 3)
+            if c.depth:
+                obs[keys.DEPTH] = f32(T, H, W, 1)
+        if self.carries_goal_views:
+            obs.update({keys.GOAL_IMAGE: img(H, W, 3), keys.HAS_GOAL_IMAGE: flag()})
         self.observation_spec = Composite(obs, shape=B, device=dev)
         if k.action_mode == "waypoints":
             r = k.waypoint_range
@@ -207,8 +215,8 @@ class NavEnv(EnvBase):
         z = lambda *s, dtype=torch.float32: torch.zeros(B, *s, dtype=dtype, device=dev)  # noqa: E731
         self._ep, self._serial, self._steps = z(dtype=torch.long), z(dtype=torch.long), z(dtype=torch.long)
         self._pos, self._yaw = z(3), z()
-        self._rgb = z(T, H, W, 3, dtype=torch.uint8)
-        self._depth = z(T, H, W, 1) if c.depth else None
+        self._rgb = z(T, H, W, 3, dtype=torch.uint8) if self.carries_frames else None
+        self._depth = z(T, H, W, 1) if c.depth and self.carries_frames else None
         self._pos_hist = z(T, 3)
         self._dist = z()
         self._progress = ProgressState(z(), z(dtype=torch.long), z(dtype=torch.long))
@@ -217,7 +225,7 @@ class NavEnv(EnvBase):
         self._undefined_steps = z(dtype=torch.long)  # steps whose geodesic distance was undefined
         self._warned_undefined = False
         self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
-        self._agent_goal_image = z(H, W, 3, dtype=torch.uint8)
+        self._agent_goal_image = z(H, W, 3, dtype=torch.uint8) if self.carries_goal_views else None
         self._agent_has_goal_image = z(1, dtype=torch.bool)
         self._agent_tokens = z(self.config.instruction_length, dtype=torch.long)
         self._started = False
@@ -272,7 +280,7 @@ class NavEnv(EnvBase):
         self._collisions = self._collisions + collided.long()
         self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
         t2 = time.perf_counter()
-        rgb, depth = self.camera.render(end, plan_yaw) if cfg.camera.enabled else (None, None)
+        rgb, depth = self.camera.render(end, plan_yaw) if cfg.camera.enabled and self.carries_frames else (None, None)
         t3 = time.perf_counter()
         self._push_frame(rgb, depth, end)
         terminated = success | intervention
@@ -325,7 +333,8 @@ class NavEnv(EnvBase):
         serial = self._cursor + torch.arange(n, device=self.device)
         self._cursor += n
         pos, yaw = self.table.start_position[ep], self.table.start_yaw[ep]
-        if self.config.camera.enabled:  # disabled: the frame history stays all zeros
+        render = self.carries_frames and self.config.camera.enabled  # switched off later: the history stays
+        if render:
             t0 = time.perf_counter()
             rgb, depth = self.camera.render(pos, yaw)
             self.timings["reset_render"] += time.perf_counter() - t0
@@ -334,7 +343,7 @@ class NavEnv(EnvBase):
         zl = torch.zeros(n, dtype=torch.long, device=self.device)
         self._ep, self._serial, self._steps = put(self._ep, ep), put(self._serial, serial), put(self._steps, zl)
         self._pos, self._yaw, self._dist = put(self._pos, pos), put(self._yaw, yaw), put(self._dist, d0)
-        if self.config.camera.enabled:
+        if render:
             self._rgb = put(self._rgb, rgb.unsqueeze(1).expand(n, T, *rgb.shape[1:]))
             if self._depth is not None:
                 self._depth = put(self._depth, depth.unsqueeze(1).expand(n, T, *depth.shape[1:]))
@@ -345,7 +354,8 @@ class NavEnv(EnvBase):
         self._nonfinite = put(self._nonfinite, zl)
         self._undefined_steps = put(self._undefined_steps, zl)
         self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
-        self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
+        if self.carries_goal_views:
+            self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
         self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
         self._agent_tokens = put(self._agent_tokens, self.table.instruction_tokens[ep])
 
@@ -406,7 +416,7 @@ class NavEnv(EnvBase):
     # ------------------------------------------------------------------ observations
 
     def _push_frame(self, rgb: torch.Tensor, depth: torch.Tensor | None, pos: torch.Tensor) -> None:
-        if self.config.camera.enabled:  # disabled: the history stays all zeros, nothing to shift
+        if rgb is not None:  # camera off: no frames (or, switched off later, the history stays)
             self._rgb = torch.cat([self._rgb[:, 1:], rgb.unsqueeze(1)], 1)
             if self._depth is not None:
                 self._depth = torch.cat([self._depth[:, 1:], depth.unsqueeze(1)], 1)
@@ -420,12 +430,9 @@ class NavEnv(EnvBase):
         goal = world_to_body_2d(self.table.goal_position[ep, None, :2], xy, yaw)[:, 0]  # [B, 2]
         dyaw = wrap_angle(self.table.goal_yaw[ep] - yaw)
         obs = {
-            keys.RGB: self._rgb,
             keys.PAST_POSITIONS: past,
             keys.GOAL_VECTOR: goal,
             keys.GOAL_POSE: torch.cat([goal, torch.cos(dyaw)[:, None], torch.sin(dyaw)[:, None]], -1),
-            keys.GOAL_IMAGE: self._agent_goal_image,  # per-agent copies, replaced at reset only
-            keys.HAS_GOAL_IMAGE: self._agent_has_goal_image,
             keys.INSTRUCTION_TOKENS: self._agent_tokens,
             # (keys.PRIVILEGED, ...): the nested sub-TensorDict of ground truth
             keys.EPISODE_INDEX: ep.unsqueeze(-1),
@@ -435,8 +442,12 @@ class NavEnv(EnvBase):
             keys.DISTANCE_TO_GOAL: self._dist.unsqueeze(-1),
             **{k: v.unsqueeze(-1) for k, v in self._flags.items()},
         }
+        if self._rgb is not None:
+            obs[keys.RGB] = self._rgb
         if self._depth is not None:
             obs[keys.DEPTH] = self._depth
+        if self.carries_goal_views:  # per-agent copies, replaced at reset only
+            obs.update({keys.GOAL_IMAGE: self._agent_goal_image, keys.HAS_GOAL_IMAGE: self._agent_has_goal_image})
         return TensorDict(obs, batch_size=[B], device=self.device)
 
     # ------------------------------------------------------------------ navmesh boundary (scene frame)
