@@ -14,6 +14,7 @@ from torchrl.envs.utils import check_env_specs
 
 from wanderland_nav import keys
 from wanderland_nav.envs import ExpertPolicy, NavEnv, NavEnvConfig, RandomPolicy, aggregate_metrics
+from wanderland_nav.envs.camera import group_size
 from wanderland_nav.envs.evaluation import run_evaluation
 
 
@@ -151,7 +152,7 @@ def test_seeded_rollouts_are_reproducible_and_seeds_differ():
 
 def test_step_path_is_batched():
     """One navmesh motion call and ceil(B / render_chunk) render calls per step, whatever B is (the
-    calls run on concurrent threads, so their order is not fixed)."""
+    calls run on concurrent threads, so their order is not fixed); at least two groups when B >= 2."""
     c = small_config()
     c.camera.render_chunk = 4
     env = make_env(B=10, config=c)
@@ -161,6 +162,7 @@ def test_step_path_is_batched():
     td[keys.ACTION] = torch.zeros(10, 5, 2)
     env.step(td)
     assert env.navmesh.move_calls == 1 and sorted(env.camera.renderer.calls) == [2, 4, 4]
+    assert [group_size(B, 16) for B in (1, 2, 3, 8, 25, 64)] == [1, 1, 2, 4, 13, 16]
 
 
 @pytest.mark.parametrize("mode", ["waypoints", "velocity"])

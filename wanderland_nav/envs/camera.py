@@ -32,6 +32,12 @@ def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
     return torch.as_tensor(pinhole_intrinsics(cfg.width, cfg.height, cfg.hfov_deg, cfg.camera_model), dtype=torch.float32)
 
 
+def group_size(B: int, render_chunk: int) -> int:
+    """Cameras per renderer call: at most `render_chunk`, and at most half of B, so that two threads
+    have work at the training batch (B = 8). Never depends on the thread count (same images for any)."""
+    return max(1, min(render_chunk, -(-B // 2)))
+
+
 class AgentCamera:
     """Renders what agents at nav-frame poses see, `render_chunk` cameras per renderer call, groups on
     `workers()` threads."""
@@ -64,8 +70,8 @@ class AgentCamera:
     def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
         """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None.
 
-        The B cameras are rendered in groups of `render_chunk` (one batched renderer call each, which
-        bounds peak memory); the groups never depend on the thread count. On CPU with the eager
+        The B cameras are rendered in groups of `group_size(B, render_chunk)` (one batched renderer
+        call each, which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
         backend, `workers()` threads render them concurrently on one intra-op thread each
         (`render.shards`): same images for any thread count."""
         B = position_nav.shape[0]
@@ -78,7 +84,8 @@ class AgentCamera:
                 depth.zero_()
             return rgb, depth
         viewmats = self.cam_from_world(position_nav, yaw)
-        groups = [(s, min(B, s + self.cfg.render_chunk)) for s in range(0, B, self.cfg.render_chunk)]
+        size = group_size(B, self.cfg.render_chunk)
+        groups = [(s, min(B, s + size)) for s in range(0, B, size)]
         render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
         if self.device.type == "cpu" and self.cfg.render_backend == "torch":
             map_single_threaded(render_group, groups, self.workers())
