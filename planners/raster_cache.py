@@ -73,12 +73,19 @@ class RasterCache:
         self._trim()
         return out
 
-    def put(self, keys: list[str], rows: np.ndarray) -> None:
-        """Store freshly built rows `[len(keys), P]` int32."""
+    def put(self, keys: list[str], rows) -> None:
+        """Store freshly built rows (`P` int32 each; views of the caller's raster are kept as they are,
+        not copied) in memory and on disk."""
         self.stats["built"] += len(keys)
+        self.share(keys, rows)
+        for k in keys:
+            self._write(f"goal_{k}.npy", lambda f, row=self._entry["rows"][k]: np.save(f, row))
+
+    def share(self, keys: list[str], rows) -> None:
+        """Keep `rows` (the caller's copies of rows it got from `get`, or built) as the memory rows of
+        `keys`, so that a row read from disk or held for an older raster is not kept twice."""
         for k, row in zip(keys, rows):
-            self._entry["rows"][k] = row = np.ascontiguousarray(row, dtype=np.int32)
-            self._write(f"goal_{k}.npy", lambda f, row=row: np.save(f, row))
+            self._entry["rows"][k] = np.ascontiguousarray(row, dtype=np.int32)
         self._trim()
 
     def pairs(self, build) -> VisiblePairs:
@@ -126,9 +133,11 @@ class RasterCache:
 
     def _trim(self) -> None:
         """Drop the least recently used navmeshes' entries beyond `MEMORY_BUDGET` (never the current one)."""
-        def size(e):
+        def size(e):  # rows that are views of a raster's [G, P] matrix keep all of it alive: count it once
             p = e["pairs"]
-            return sum(r.nbytes for r in e["rows"].values()) + (sum(a.nbytes for a in p.arrays().values()) if p else 0)
+            owners = [r if r.base is None else r.base for r in e["rows"].values()]
+            rows = sum({id(o): o.nbytes for o in owners}.values())
+            return rows + (sum(a.nbytes for a in p.arrays().values()) if p else 0)
         total = sum(size(e) for e in _MEMORY.values())
         while total > MEMORY_BUDGET and len(_MEMORY) > 1 and next(iter(_MEMORY)) != self.key:
             total -= size(_MEMORY.popitem(last=False)[1])

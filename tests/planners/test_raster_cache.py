@@ -101,3 +101,20 @@ def test_content_hash_ignores_bake_time_and_survives_save_load(tmp_path):
     a.save(tmp_path / "navmesh.npz")
     assert NavMesh.load(tmp_path / "navmesh.npz").content_hash == a.content_hash
     assert bake(room_with_pillars(), agent_radius=0.3).content_hash != a.content_hash
+
+
+def test_memory_cache_holds_views_of_the_raster_not_a_second_copy(l_nm, tmp_path):
+    """Built rows, and rows read from disk, are kept in memory as views of the raster's own matrix."""
+    from planners.raster_cache import _MEMORY
+
+    goals = l_nm.random_navigable_points(3, seed=6)
+    built = l_nm.distance_field(goals).raster(cache_dir=tmp_path)
+    built.ensure()
+    rows = _MEMORY[built.cache.key]["rows"]
+    assert len(rows) == 3 and all(np.shares_memory(r, built.source) for r in rows.values())
+    clear_memory()  # from disk: the loaded arrays are dropped for views of the new raster
+    loaded = l_nm.distance_field(goals).raster(cache_dir=tmp_path)
+    loaded.ensure()
+    assert loaded.cache.stats["disk_hits"] == 3
+    assert all(np.shares_memory(r, loaded.source) for r in _MEMORY[loaded.cache.key]["rows"].values())
+    np.testing.assert_array_equal(loaded.source, built.source)
