@@ -18,10 +18,13 @@ agent cameras of a `NavEnv` reset on the tiny demo scene; prints a per-stage CPU
 the dense reference (projection, colours, binning, composite) and of the packed fast path, then
 renders/s of `render()` (eager) and of the compiled path, and the PSNR between the two. The stage
 functions exist in both the old and the new code, so `PYTHONPATH=<old checkout>` profiles the old.
+`--env --groups`: the same cameras rendered in groups of 1..64 cameras per call (the env's render
+groups on threads, `render/shards.py`): total CPU, per-group cost and the 2-thread makespan.
 
 Usage:
   python experiments/bench_render.py                     # quick table (CPU, 2 threads)
   python experiments/bench_render.py --env --batch 64 --res 32 --max-gaussians 10000 [--compiled]
+  python experiments/bench_render.py --env --groups --batch 64 --res 32 --max-gaussians 10000 --repeat 2
   python experiments/bench_render.py --only 50000,64,1,fwd --compiled   # compiled vs eager rows
   python experiments/bench_render.py --psnr 64           # compiled vs eager PSNR on guitar.ply, playbot.ply
   python experiments/bench_render.py --threads 1 --baseline
@@ -198,6 +201,7 @@ def main() -> None:
     ap.add_argument("--res", type=int, default=32)
     ap.add_argument("--max-gaussians", type=int, default=None)
     ap.add_argument("--psnr", type=int, default=None, help="compiled vs eager PSNR at this size on the real splats")
+    ap.add_argument("--groups", action="store_true", help="with --env: cost of rendering the cameras in groups")
     ap.add_argument("--_child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a._child:
@@ -208,8 +212,10 @@ def main() -> None:
 
         torch.set_num_threads(a.threads)
         print(f"threads={a.threads}; load avg {os.getloadavg()}")
-        from render_env_profile import env_profile, splat_psnr
-        if a.env:
+        from render_env_profile import env_profile, group_costs, splat_psnr
+        if a.env and a.groups:
+            group_costs(a.batch, a.res, a.max_gaussians, a.repeat)
+        elif a.env:
             env_profile(a.batch, a.res, a.max_gaussians, a.repeat, a.compiled)
         else:
             splat_psnr(a.psnr, a.threads)

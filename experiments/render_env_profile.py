@@ -151,3 +151,27 @@ def _scene_all(bench_render, C: int, size: int):
 
     n = len(Gaussians.load(bench_render.SPLAT))
     return bench_render._scene(n, C, size, "cpu")
+
+
+def group_costs(B: int, res: int, max_gaussians: int | None, repeat: int) -> None:
+    """CPU ms of rendering the B env cameras as groups of g cameras (one renderer call each, 1 thread),
+    each group's own cost, and the 2-thread makespan when two threads pull groups in order (what
+    `render.shards` does): the price of smaller calls against the balance they give."""
+    from wanderland_nav.render import render
+
+    g, V, K = env_views(B, res, max_gaussians)
+    torch.set_num_threads(1)
+    print(f"B={B}, {res}x{res}, {len(g)} Gaussians, 1 thread, best CPU ms of {repeat}")
+    for size in (1, 2, 4, 8, 16, 32, 64):
+        if size > B:
+            break
+        costs = []
+        for s in range(0, B, size):
+            cpu, _, _ = _best(lambda s=s: render(g, V[s:s + size], K[s:s + size], res, res, render_mode="RGB"), repeat)
+            costs.append(1e3 * cpu)
+        busy = [0.0, 0.0]
+        for c in costs:  # the next group goes to whichever thread is free first
+            busy[busy.index(min(busy))] += c
+        shown = ", ".join(f"{c:.0f}" for c in costs) if len(costs) <= 8 else f"{len(costs)} groups"
+        print(f"  {size:>2} cameras per call: total {sum(costs):7.1f} ms  2-thread makespan {max(busy):7.1f} "
+              f"(ideal {sum(costs) / 2:7.1f})  groups: {shown}")
