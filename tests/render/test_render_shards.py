@@ -45,3 +45,20 @@ def test_an_exception_in_a_worker_reaches_the_caller():
     with pytest.raises(ValueError, match="item 3 is bad"):
         map_single_threaded(fail_on_three, list(range(8)), workers=2)
     assert torch.get_num_threads() == 2
+
+
+def test_a_forked_child_gets_its_own_threads():
+    """Multiprocessing collectors fork: the pool's threads do not exist in the child, work must not hang there."""
+    import multiprocessing as mp
+
+    torch.set_num_threads(2)
+    map_single_threaded(lambda i: i, [0, 1], workers=2)  # the parent's pool exists now
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        out = pool.apply_async(_square_on_two_threads).get(timeout=60)
+    assert out == [0, 1, 4, 9]
+
+
+def _square_on_two_threads():
+    torch.set_num_threads(2)
+    return map_single_threaded(lambda i: i * i, list(range(4)), workers=2)

@@ -11,12 +11,14 @@ Determinism: the caller splits the work into items that never depend on K (the e
 thread runs it, so results are bit-identical for any K. Workers pull items from a shared queue,
 which balances groups of unequal cost (per-camera cost varies ~2x between views).
 
-OpenMP's thread count is a per-thread setting: `torch.set_num_threads(1)` in a worker limits that
-worker only; the caller's own setting is restored when it has finished its share.
+OpenMP's thread count is a per-thread setting, but torch also keeps a process default that a
+worker's `torch.set_num_threads(1)` changes, and under pytest the caller's count was seen to follow
+it: the caller reads its count before any helper starts and sets it back when all have finished.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Sequence, TypeVar
@@ -28,6 +30,17 @@ R = TypeVar("R")
 
 _pools: dict[int, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
+
+
+def _forget_pools_in_child() -> None:
+    """A forked child (multiprocessing collectors) inherits the pools but not their threads: work sent
+    there would wait forever. It starts its own pools on first use instead."""
+    global _pools_lock
+    _pools.clear()
+    _pools_lock = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pools_in_child)
 
 
 def _one_intra_op_thread() -> None:
@@ -67,8 +80,8 @@ def map_single_threaded(fn: Callable[[T], R], items: Sequence[T], workers: int) 
                 except BaseException as e:  # noqa: BLE001  re-raised in the caller below
                     errors.append(e)
 
+    n = torch.get_num_threads()  # before the helpers start (see the module docstring)
     futures = [_pool(workers - 1).submit(drain) for _ in range(workers - 1)] if workers > 1 else []
-    n = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
         drain()
