@@ -26,6 +26,8 @@ def test_results_in_order_on_several_threads_with_one_intra_op_thread_each():
     assert all(o[2] == 1 for o in out)  # one intra-op thread in every worker, the caller included
     assert not any(o[3] for o in out)  # grad mode is thread-local: the caller's no_grad reaches the helpers
     assert torch.get_num_threads() == 2  # the caller's setting restored
+    again = map_single_threaded(probe, list(range(2, 6)), workers=2)  # the pool's threads are reused
+    assert all(o[2] == 1 for o in again) and torch.get_num_threads() == 2
 
 
 def test_single_worker_runs_in_the_caller_on_one_thread():

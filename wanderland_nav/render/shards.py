@@ -69,6 +69,8 @@ def map_single_threaded(fn: Callable[[T], R], items: Sequence[T], workers: int) 
     grad = torch.is_grad_enabled()
 
     def drain() -> None:
+        if torch.get_num_threads() != 1:  # helpers: set at start, but re-checked (see the module docstring)
+            torch.set_num_threads(1)
         with torch.set_grad_enabled(grad):
             while not errors:
                 with lock:
