@@ -67,6 +67,13 @@ class PPOConfig:
                              f"({self.total_frames})")
         if not 0 < self.minibatch_size <= self.frames_per_batch:
             raise ValueError(f"PPO: minibatch_size={self.minibatch_size} must be in (0, frames_per_batch]")
+        iterations = self.total_frames // self.frames_per_batch
+        if iterations <= self.critic_warmup_iters:  # the "RL" row would silently be the initial policy
+            raise ValueError(
+                f"PPO: total_frames={self.total_frames} // frames_per_batch={self.frames_per_batch} = {iterations} "
+                f"iteration(s) <= critic_warmup_iters={self.critic_warmup_iters}: every iteration only trains the "
+                f"critic and the policy is never updated. Raise total_frames above frames_per_batch * "
+                f"critic_warmup_iters = {self.frames_per_batch * self.critic_warmup_iters} or lower critic_warmup_iters")
 
 
 def make_actor(policy: NavPolicy) -> ProbabilisticActor:
@@ -141,10 +148,6 @@ class PPOTrainer:
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
                  seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
-        iterations = cfg.total_frames // cfg.frames_per_batch
-        if iterations <= cfg.critic_warmup_iters:  # the "RL" row would be the init policy, unchanged
-            log.warning("PPO: %d iteration(s) <= critic_warmup_iters=%d: no policy update will be made "
-                        "(raise total_frames)", iterations, cfg.critic_warmup_iters)
         self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
