@@ -224,3 +224,17 @@ def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint
     for k, v in p.state_dict().items():  # the optimiser never stepped on the NaN loss
         assert torch.isfinite(v.float()).all(), k
         torch.testing.assert_close(v, good["policy"][k])
+
+
+def test_init_std_sets_exploration_and_std_lr_moves_only_the_std_faster(tmp_path):
+    p = tiny_policy()
+    t = trainer(p, tmp_path / "a", 64, init_std=0.1, std_lr=0.05)
+    torch.testing.assert_close(p.scale(), torch.full_like(p.scale(), 0.1))
+    assert [g["lr"] for g in t.optim.param_groups] == [3e-4, 0.05]
+    t.train()
+    moved = (p.scale() - 0.1).abs().max()
+    q = tiny_policy()
+    trainer(q, tmp_path / "b", 64, init_std=0.1).train()                 # std at the actor's lr
+    assert moved > 10 * (q.scale() - 0.1).abs().max() > 0
+    with pytest.raises(ValueError, match="std=0.01 must exceed min_std=0.02"):
+        trainer(tiny_policy(), tmp_path / "c", 64, init_std=0.01)
