@@ -187,8 +187,9 @@ def test_train_config_refusal_names_the_keys_and_a_disabled_stage_is_not_checked
     from wanderland_nav.compose.cli import compose_config
     from wanderland_nav.compose.schema import TrainConfig
 
-    with pytest.raises(ValueError, match=r"algo\.ppo\.total_frames=400 // frames_per_batch=400 = 1 iteration"):
-        typed_config(compose_config("train", ["+exp=citywalker_rl", "algo.ppo.total_frames=400"]), TrainConfig)
+    with pytest.raises(ValueError, match=r"algo\.ppo\.total_frames=1600 // frames_per_batch=800 = 2 iteration"
+                                         r"\(s\) <= critic_warmup_iters=2"):
+        typed_config(compose_config("train", ["+exp=citywalker_rl", "algo.ppo.total_frames=1600"]), TrainConfig)
     bc_only = typed_config(compose_config("train", ["+exp=citywalker_bc", "algo.ppo.total_frames=400"]), TrainConfig)
     assert bc_only.algo.ppo.enabled is False and bc_only.algo.ppo.total_frames == 400
 
