@@ -107,8 +107,8 @@ class NavPolicy(TensorDictModuleBase):
         self.register_buffer("image_std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1))
         self.register_buffer("waypoint_spacing", torch.tensor(float(cfg.waypoint_spacing)))
         # std = min_std + softplus(raw): smooth, never below min_std, no exp blow-up
-        raw0 = math.log(math.expm1(cfg.init_std - min_std))
-        self.std_param = nn.Parameter(torch.full((self.num_waypoints, 2), raw0))
+        self.std_param = nn.Parameter(torch.empty(self.num_waypoints, 2))
+        self.set_std(cfg.init_std)
         self.value_head = nn.Sequential(
             nn.Linear(self.feature_dim, value_hidden), nn.Tanh(), nn.Linear(value_hidden, 1)
         )
@@ -175,6 +175,14 @@ class NavPolicy(TensorDictModuleBase):
     # ------------------------------------------------------------------ PPO interface
     def scale(self) -> torch.Tensor:  # [K, 2]
         return self.min_std + F.softplus(self.std_param)
+
+    @torch.no_grad()
+    def set_std(self, std: float) -> None:
+        """Every waypoint coordinate's exploration std := `std` metres. PPO's `init_std` uses it: BC never
+        trains the std, so a BC policy would otherwise explore with the config's `init_std`."""
+        if not std > self.min_std:
+            raise ValueError(f"{type(self).__name__}: std={std} must exceed min_std={self.min_std}")
+        self.std_param.fill_(math.log(math.expm1(std - self.min_std)))
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         obs, lead = self._gather(td)

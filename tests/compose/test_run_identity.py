@@ -26,11 +26,11 @@ def test_identity_ignores_cosmetic_keys_and_follows_settings_and_scene(tmp_path)
     scene = scene_identity(tmp_path)
     base = run_identity(_train_dict(), scene)
     assert run_identity(_train_dict(["progress=false", "logger=rerun"]), scene)["hash"] == base["hash"]
-    more = run_identity(_train_dict(["algo.ppo.total_frames=2400"]), scene)
+    more = run_identity(_train_dict(["algo.ppo.total_frames=57600"]), scene)
     assert more["hash"] != base["hash"]
     (tmp_path / "navmesh.npz").write_bytes(b"navmesh v2")  # same folder, another prepared artefact
     assert run_identity(_train_dict(), scene_identity(tmp_path))["hash"] != base["hash"]
-    with pytest.raises(RunIdentityError, match=r"algo.ppo.total_frames: 1200 -> 2400[\s\S]*start fresh"):
+    with pytest.raises(RunIdentityError, match=r"algo.ppo.total_frames: 28800 -> 57600[\s\S]*start fresh"):
         check_resume(base, more, tmp_path, "start fresh with another run_dir=")
     with pytest.raises(RunIdentityError, match="without a recorded identity"):
         check_resume(None, more, tmp_path, "start fresh")

@@ -149,14 +149,49 @@ def test_multi_sync_collector_two_workers(tmp_path):
     assert [s for s, _ in log.rows] == [32, 64]
 
 
-def test_critic_warmup_leaves_the_policy_alone(tmp_path):
+class SnapshotLogger(ListLogger):
+    """Keeps the policy's and critic's weights as they were when each iteration was logged."""
+
+    def __init__(self):
+        super().__init__()
+        self.policy_states, self.critic_states, self.trainer = [], [], None
+
+    def log_scalars(self, scalars, step):
+        super().log_scalars(scalars, step)
+        self.policy_states.append({k: v.clone() for k, v in self.trainer.policy.state_dict().items()})
+        self.critic_states.append({k: v.clone() for k, v in self.trainer.critic.state_dict().items()})
+
+
+def test_critic_warmup_leaves_the_policy_alone_then_updates_it(tmp_path):
     p = tiny_policy()
     before = {k: v.clone() for k, v in p.state_dict().items()}
-    t = trainer(p, tmp_path, 32, critic_warmup_iters=1)
-    critic_before = {k: v.clone() for k, v in t.critic.state_dict().items()}
+    log = SnapshotLogger()
+    t = log.trainer = trainer(p, tmp_path, 64, log, critic_warmup_iters=1)
+    critic_before = t.critic.state_dict()["out.weight"].clone()
     t.train()
-    assert all(torch.equal(before[k], v) for k, v in p.state_dict().items())
-    assert not torch.equal(critic_before["out.weight"], t.critic.state_dict()["out.weight"])
+    warm, after = log.policy_states
+    assert all(torch.equal(before[k], v) for k, v in warm.items())              # iteration 1: critic only
+    assert not torch.equal(critic_before, log.critic_states[0]["out.weight"])
+    assert any(not torch.equal(before[k], v) for k, v in after.items())        # iteration 2: the actor moved
+
+
+@pytest.mark.parametrize("total,warmup", [(32, 1), (64, 2), (95, 2)])
+def test_budget_without_a_policy_update_is_refused(total, warmup):
+    with pytest.raises(ValueError, match=rf"total_frames={total} // frames_per_batch=32 = {total // 32} "
+                                         rf"iteration\(s\) <= critic_warmup_iters={warmup}.*never updated"):
+        PPOConfig(total_frames=total, frames_per_batch=32, minibatch_size=16, critic_warmup_iters=warmup)
+
+
+def test_train_config_refusal_names_the_keys_and_a_disabled_stage_is_not_checked():
+    from wanderland_nav.compose import typed_config
+    from wanderland_nav.compose.cli import compose_config
+    from wanderland_nav.compose.schema import TrainConfig
+
+    with pytest.raises(ValueError, match=r"algo\.ppo\.total_frames=1600 // frames_per_batch=800 = 2 iteration"
+                                         r"\(s\) <= critic_warmup_iters=2"):
+        typed_config(compose_config("train", ["+exp=citywalker_rl", "algo.ppo.total_frames=1600"]), TrainConfig)
+    bc_only = typed_config(compose_config("train", ["+exp=citywalker_bc", "algo.ppo.total_frames=400"]), TrainConfig)
+    assert bc_only.algo.ppo.enabled is False and bc_only.algo.ppo.total_frames == 400
 
 
 class NaNRewardEnv(FakeNavEnv):
@@ -190,3 +225,17 @@ def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint
     for k, v in p.state_dict().items():  # the optimiser never stepped on the NaN loss
         assert torch.isfinite(v.float()).all(), k
         torch.testing.assert_close(v, good["policy"][k])
+
+
+def test_init_std_sets_exploration_and_std_lr_moves_only_the_std_faster(tmp_path):
+    p = tiny_policy()
+    t = trainer(p, tmp_path / "a", 64, init_std=0.1, std_lr=0.05)
+    torch.testing.assert_close(p.scale(), torch.full_like(p.scale(), 0.1))
+    assert [g["lr"] for g in t.optim.param_groups] == [3e-4, 0.05]
+    t.train()
+    moved = (p.scale() - 0.1).abs().max()
+    q = tiny_policy()
+    trainer(q, tmp_path / "b", 64, init_std=0.1).train()                 # std at the actor's lr
+    assert moved > 10 * (q.scale() - 0.1).abs().max() > 0
+    with pytest.raises(ValueError, match="std=0.01 must exceed min_std=0.02"):
+        trainer(tiny_policy(), tmp_path / "c", 64, init_std=0.01)

@@ -85,6 +85,14 @@ class BCStage(BCConfig):
 class PPOStage(PPOConfig):
     enabled: bool = True
 
+    def __post_init__(self):
+        if not self.enabled:  # a disabled stage's sizes are never used (conf/algo/bc.yaml)
+            return
+        try:
+            super().__post_init__()
+        except ValueError as e:  # name the config keys: "algo.ppo.total_frames=..."
+            raise ValueError(str(e).replace("PPO: ", "algo.ppo.", 1)) from None
+
 
 @dataclass
 class AlgoGroup:

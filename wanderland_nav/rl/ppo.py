@@ -60,6 +60,9 @@ class PPOConfig:
     critic_hidden: int = 256
     critic_horizon: float = 100.0      # the critic's clock input is step_count / this (a scale, not a limit)
     anneal_lr: bool = True             # actor lr: linear to 0 over total_frames
+    init_std: float | None = None      # exploration std (m) PPO starts from; None: the policy's own (BC keeps
+                                       #   the policy config's init_std: BC does not train it)
+    std_lr: float | None = None        # the exploration std's own Adam lr; None: the actor's `lr`
 
     def __post_init__(self):
         if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
@@ -67,6 +70,13 @@ class PPOConfig:
                              f"({self.total_frames})")
         if not 0 < self.minibatch_size <= self.frames_per_batch:
             raise ValueError(f"PPO: minibatch_size={self.minibatch_size} must be in (0, frames_per_batch]")
+        iterations = self.total_frames // self.frames_per_batch
+        if iterations <= self.critic_warmup_iters:  # the "RL" row would silently be the initial policy
+            raise ValueError(
+                f"PPO: total_frames={self.total_frames} // frames_per_batch={self.frames_per_batch} = {iterations} "
+                f"iteration(s) <= critic_warmup_iters={self.critic_warmup_iters}: every iteration only trains the "
+                f"critic and the policy is never updated. Raise total_frames above frames_per_batch * "
+                f"critic_warmup_iters = {self.frames_per_batch * self.critic_warmup_iters} or lower critic_warmup_iters")
 
 
 def make_actor(policy: NavPolicy) -> ProbabilisticActor:
@@ -141,10 +151,6 @@ class PPOTrainer:
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
                  seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
-        iterations = cfg.total_frames // cfg.frames_per_batch
-        if iterations <= cfg.critic_warmup_iters:  # the "RL" row would be the init policy, unchanged
-            log.warning("PPO: %d iteration(s) <= critic_warmup_iters=%d: no policy update will be made "
-                        "(raise total_frames)", iterations, cfg.critic_warmup_iters)
         self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
@@ -159,8 +165,13 @@ class PPOTrainer:
                            reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
         self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=None, average_gae=False)  # values given
         self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
-        head = {id(p) for p in policy.value_head.parameters()}  # the policy's own head: not PPO's critic
-        self.optim = torch.optim.Adam([p for p in policy.trainable_parameters() if id(p) not in head], lr=cfg.lr)
+        if cfg.init_std is not None:  # a resumed run's checkpoint (restore) overwrites it again
+            policy.set_std(cfg.init_std)
+        skip = {id(p) for p in policy.value_head.parameters()} | {id(policy.std_param)}  # head: not PPO's critic
+        groups = [{"params": [p for p in policy.trainable_parameters() if id(p) not in skip], "lr": cfg.lr},
+                  {"params": [policy.std_param], "lr": cfg.lr if cfg.std_lr is None else cfg.std_lr}]
+        self.optim = torch.optim.Adam(groups)
+        self.base_lrs = [g["lr"] for g in groups]
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
         self.iteration, self.frames = 0, 0
 
@@ -208,7 +219,8 @@ class PPOTrainer:
                "losses/advantage_mean": float(adv.mean()), "losses/advantage_std": float(adv.std()),
                "losses/value_target_mean": float(target.mean()), "losses/critic_warmup": float(warmup)}
         if cfg.anneal_lr:
-            self.optim.param_groups[0]["lr"] = cfg.lr * max(0.0, 1.0 - self.frames / cfg.total_frames)
+            for group, lr in zip(self.optim.param_groups, self.base_lrs):
+                group["lr"] = lr * max(0.0, 1.0 - self.frames / cfg.total_frames)
         res["losses/lr"] = self.optim.param_groups[0]["lr"]
         if not warmup:
             res.update(self._actor_epochs(flat))
