@@ -13,6 +13,7 @@ from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
 from wanderland_nav.compose.study_cells import eval_records
 from wanderland_nav.degrade.crosseval import fig8, table3
+from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -45,10 +46,27 @@ def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: 
     digests = cell_digests(c, cells)
     records = eval_records(manifest, cells, digests)
     envs = [GROUNDED, *s.presets]
-    f8_text, chart = fig8(records, envs, s.fixed_policies, s.seeds, metric=s.rank_metric,
-                          resamples=s.bootstrap_resamples)
-    text = "\n\n".join([header, "\n".join(cell_status_lines(manifest, cells, digests)),
-                        table3(records, envs, s.seeds), f8_text])
+    ranking = list(s.seeds if s.ranking_seeds is None else s.ranking_seeds)
+    parts = [header, "\n".join(cell_status_lines(manifest, cells, digests)), table3(records["own"], envs, s.seeds)]
+    chart = {}
+    if "grounded_routes" in s.protocols:
+        routes = {c_.env: manifest.entries[c_.key]["info"]["routes"] for c_ in cells
+                  if c_.protocol == "grounded_routes" and manifest.status(c_.key, digests[c_.key]) == "done"}
+        fixed = [(GROUNDED, ph) for ph in s.fixed_policies]
+        text, chart, _ = fig8_same_routes(records["grounded_routes"], envs, fixed, s.seeds, routes,
+                                          metric=s.rank_metric, resamples=s.bootstrap_resamples)
+        parts.append(f"[grounded-trained policies, seeds {list(s.seeds)}]\n" + text)
+        ranked = fixed + [(e, ph) for e in s.presets for ph in s.ranked_phases]
+        if len(ranked) > len(fixed):
+            text, _, _ = fig8_same_routes(records["grounded_routes"], envs, ranked, ranking, routes,
+                                          metric=s.rank_metric, resamples=s.bootstrap_resamples)
+            parts.append(f"[misranking test: grounded- and degraded-trained policies, seeds {ranking}]\n" + text)
+    if "own" in s.protocols:
+        own_text, own_chart = fig8(records["own"], envs, s.fixed_policies, ranking, metric=s.rank_metric,
+                                   resamples=s.bootstrap_resamples)
+        parts.append(f"[each environment's OWN test episodes, seeds {ranking}]\n" + own_text)
+        chart = chart if any(chart.values()) else own_chart
+    text = "\n\n".join(parts)
     written = {"table": out / "table.txt"}
     atomic_write_text(written["table"], text + "\n")
     if any(chart.values()):
