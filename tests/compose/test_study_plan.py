@@ -45,13 +45,18 @@ def test_plan_has_every_cell_once_and_needs_come_first(tmp_path):
     assert {c.seed for c in part if c.kind == "eval" and c.env != GROUNDED and c.protocol == "own"} == {1}
     assert {c.seed for c in part if c.kind == "eval" and c.env != GROUNDED and c.policy[0] != GROUNDED} == {1}
     assert {c.seed for c in part if c.kind == "eval" and c.protocol != "own" and c.policy[0] == GROUNDED} == {0, 1}
+    only = plan_cells(_config(tmp_path, trained_presets=["holes"]).study)  # scale_1.2 evaluated in, not trained in
+    assert {c.env for c in only if c.kind == "train"} == {GROUNDED, "holes"}
+    assert {c.policy[0] for c in only if c.kind == "eval"} == {GROUNDED, "holes"}
+    assert {c.env for c in only if c.protocol == "grounded_routes"} == {"scale_1.2", "holes"}
 
 
 @pytest.mark.parametrize("study, match", [(dict(presets=["drift", "drift"]), "distinct"),
                                           (dict(presets=["grounded"]), "distinct"),
                                           (dict(fixed_policies=["BC", "PPO"]), "PPO"),
                                           (dict(protocols=["own", "same"]), "same"),
-                                          (dict(ranking_seeds=[7]), "not a subset")])
+                                          (dict(ranking_seeds=[7]), "not a subset"),
+                                          (dict(trained_presets=["drift"]), "not a subset")])
 def test_plan_rejects_bad_grids(tmp_path, study, match):
     with pytest.raises(ValueError, match=match):
         plan_cells(_config(tmp_path, **study).study)
@@ -110,7 +115,8 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
     assert c.study.presets == ["scale_1.2", "holes"] and c.study.eval_episodes == 3
     assert "debug=smoke" in c.study.train
     full = study_config(compose_config("study", ["+study=grounding"]))
-    assert sorted(full.study.presets) == ["drift", "scale_0.8", "scale_1.2", "splat_mesh", "video3dgs"]
+    assert sorted(full.study.presets) == ["drift", "scale_0.8", "video3dgs"] and full.study.seeds == [0, 1, 2]
+    assert "algo.ppo.total_frames=4800" in full.study.train  # the recipe sizes are pinned in the study
     with pytest.raises(Exception, match="eval_episode"):
         study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
 

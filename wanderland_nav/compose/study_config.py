@@ -33,6 +33,8 @@ class StudyGroup:
     protocols: List[str] = field(default_factory=lambda: list(PROTOCOLS))
     ranked_phases: List[str] = field(default_factory=lambda: ["BC+RL"])  # degraded-trained policies added to the
     # Fig.-8 ranking (evaluated on the grounded routes in every env), so Kendall tau has more than 3 policies
+    trained_presets: Optional[List[str]] = None  # presets BC+PPO is trained in (Table 3); null: all. The others are
+    # only evaluated in (Fig. 8), which costs a fraction of a training
     ranking_seeds: Optional[List[int]] = None  # seeds with the full Fig.-8 grid (own protocol + ranked_phases); null: all
     eval_split: str = "test"
     eval_episodes: Optional[int] = None  # null: every episode of the split

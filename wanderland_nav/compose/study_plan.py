@@ -78,6 +78,8 @@ def _check_grid(s: StudyGroup) -> None:
         bad = [p for p in phases if p not in allowed]
         if bad:
             raise ValueError(f"study.{what}: {bad} not among {', '.join(allowed)}")
+    if s.trained_presets is not None and not set(s.trained_presets) <= set(s.presets):
+        raise ValueError(f"study.trained_presets={s.trained_presets}: not a subset of study.presets={s.presets}")
     if s.ranking_seeds is not None and not set(s.ranking_seeds) <= set(s.seeds):
         raise ValueError(f"study.ranking_seeds={s.ranking_seeds}: not a subset of study.seeds={s.seeds}")
 
@@ -87,12 +89,13 @@ def plan_cells(s: StudyGroup) -> list[Cell]:
     builds; then per seed the untrained init, the grounded training and the fixed (grounded-trained)
     policies in the grounded environment; then per degraded environment the fixed policies on the
     grounded routes mapped into it (its Fig.-8 column), its own training and that policy in the
-    grounded environment (its Table-3 rows). Last, for `ranking_seeds`: every degraded-trained
+    grounded environment (its Table-3 rows; only for `trained_presets`). Last, for `ranking_seeds`: every degraded-trained
     `ranked_phases` policy on the grounded routes of every degraded env (the extra policies of the
     misranking test; they need every training), then the fixed policies on each env's OWN episodes."""
     _check_grid(s)
     cells = [Cell("build", p, s.degrade_seed) for p in s.presets]
     routes = "grounded_routes" in s.protocols
+    trained = [p for p in s.presets if s.trained_presets is None or p in s.trained_presets]
     for seed in s.seeds:
         cells += [Cell("init", GROUNDED, seed), Cell("train", GROUNDED, seed)]
         cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
@@ -101,15 +104,16 @@ def plan_cells(s: StudyGroup) -> list[Cell]:
         for env in s.presets:
             cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed, "grounded_routes")
                       for ph in s.fixed_policies if routes]
-            cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
-            cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
+            if env in trained:
+                cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
+                cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
         if "untrained" not in s.fixed_policies:  # the Table-3 reference row
             cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s.degrade_seed))
     for seed in (s.seeds if s.ranking_seeds is None else s.ranking_seeds):
         if routes:
-            cells += [_eval(env, seed, (trained, ph), s.degrade_seed, "grounded_routes") for env in s.presets
-                      for trained in s.presets for ph in s.ranked_phases]
-            cells += [_eval(GROUNDED, seed, (trained, ph), s.degrade_seed) for trained in s.presets
+            cells += [_eval(env, seed, (t, ph), s.degrade_seed, "grounded_routes") for env in s.presets
+                      for t in trained for ph in s.ranked_phases]
+            cells += [_eval(GROUNDED, seed, (t, ph), s.degrade_seed) for t in trained
                       for ph in s.ranked_phases if ph not in s.table3_phases]
         if "own" in s.protocols:
             cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for env in s.presets for ph in s.fixed_policies]

@@ -56,7 +56,8 @@ def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: 
         text, chart, _ = fig8_same_routes(records["grounded_routes"], envs, fixed, s.seeds, routes,
                                           metric=s.rank_metric, resamples=s.bootstrap_resamples)
         parts.append(f"[grounded-trained policies, seeds {list(s.seeds)}]\n" + text)
-        ranked = fixed + [(e, ph) for e in s.presets for ph in s.ranked_phases]
+        ranked = fixed + [(e, ph) for e in s.presets for ph in s.ranked_phases
+                          if s.trained_presets is None or e in s.trained_presets]
         if len(ranked) > len(fixed):
             text, _, _ = fig8_same_routes(records["grounded_routes"], envs, ranked, ranking, routes,
                                           metric=s.rank_metric, resamples=s.bootstrap_resamples)
