@@ -110,6 +110,11 @@ def test_same_route_tables_pair_on_the_kept_routes_and_rank_many_policies():
         matched_runs(bad, "drift", policies[0], [0])
     with pytest.raises(ValueError, match="not the same routes"):
         paired_rank_agreement(torch.zeros(3, 1, 5), torch.zeros(3, 1, 6))
+    none_kept = {**records, **{("holes", 0, *p): [] for p in policies}}  # every route infeasible in holes
+    assert matched_runs(none_kept, "holes", policies[0], [0]) is None
+    text, _, taus = fig8_same_routes(none_kept, ["grounded", "holes"], policies, [0],
+                                     {"holes": {"asked": 60, "kept": 0, "dropped": {"goal unreachable": 60}}})
+    assert "0 of 60 grounded routes kept" in text and "no policy evaluated" in text and taus == {}
     same = torch.tensor([0.1, 0.5, 0.9, 0.3])[:, None, None].expand(4, 1, 50).double()
     a = paired_rank_agreement(same, same, resamples=50)
     assert (a["tau"], a["low"], a["high"]) == (1.0, 1.0, 1.0)

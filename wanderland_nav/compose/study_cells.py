@@ -156,6 +156,10 @@ class StudyCells:
             grounded = self.env_episodes(GROUNDED, cell.seed)[1]
             episodes, routes = grounded_routes_file(grounded, s.eval_split, s.eval_episodes, scene, self.out / "routes")
             n = routes["kept"]
+            if n == 0:  # a finding (every grounded route is infeasible here), counted in the table, not a failure
+                atomic_write_json(folder / "result.json", {"cell": cell.key, "checkpoint": str(ckpt), "records": [],
+                                                           "routes": routes})
+                return {"episodes": 0, "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}}
         else:
             n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
         _, results, table = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,

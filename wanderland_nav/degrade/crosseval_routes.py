@@ -28,7 +28,7 @@ def matched_runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[st
     missing on either side. Both are S lists of the same routes in the same order."""
     g = [records.get((GROUNDED, s, *policy)) for s in seeds]
     e = [records.get((env, s, *policy)) for s in seeds]
-    if any(r is None for r in g + e):
+    if any(r is None for r in g + e) or not all(e):  # not evaluated, or no route survived the mapping
         return None
     cut = []
     for gr, er in zip(g, e):
@@ -92,7 +92,7 @@ def _chart(records, envs, policies, seeds) -> dict[str, dict[str, dict[str, Esti
     for env in envs:
         for pol in (p for p in policies if p[0] == GROUNDED):
             runs = [records.get((env, s, *pol)) for s in seeds]
-            if all(r is not None for r in runs):
+            if all(runs):  # evaluated, on at least one kept route
                 for col in chart:
                     chart[col].setdefault(env, {})[policy_label(*pol)] = estimate(runs, col)
     return chart
