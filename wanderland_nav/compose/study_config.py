@@ -60,6 +60,7 @@ class StudyConfig:
     source: SourceScene = field(default_factory=SourceScene)
     out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
     threads: Optional[int] = None  # torch intra-op threads for every cell
+    report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
 
