@@ -32,7 +32,7 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
             info = e["info"]
             ppo = info.get("ppo_policy_updates")
             lines.append(f"  episodes in {c.env} (seed {c.seed}): {info['episodes']} of {info['asked']} asked, "
-                         f"trained in {e['seconds']:.0f}s" + ("" if ppo is None else f", {ppo} PPO policy updates"))
+                         f"cell {e['seconds']:.0f}s (a resumed run counts its remainder)" + ("" if ppo is None else f", {ppo} PPO policy updates"))
     return lines
 
 

@@ -80,8 +80,10 @@ def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) 
     a = paired_rank_agreement(torch.stack(ref), torch.stack(other), resamples=resamples)
     lines.append(f"   ranking by {metric} in grounded: {ranking_text(labels, torch.stack(ref).mean(dim=(1, 2)))}")
     lines.append(f"   ranking by {metric} in {env}: {ranking_text(labels, torch.stack(other).mean(dim=(1, 2)))}")
-    lines.append(f"   Kendall tau-b over {len(labels)} policies: {a['tau']:+.2f} [{a['low']:+.2f}, {a['high']:+.2f}]"
-                 + (f", undefined (all tied) in {a['undefined']}/{resamples}" if a["undefined"] else ""))
+    tau = ("undefined (every policy tied on one side)" if math.isnan(a["tau"])
+           else f"{a['tau']:+.2f} [{a['low']:+.2f}, {a['high']:+.2f}]")
+    lines.append(f"   Kendall tau-b over {len(labels)} policies: {tau}"
+                 + (f", undefined (all tied) in {a['undefined']}/{resamples} resamples" if a["undefined"] else ""))
     return lines, a
 
 
