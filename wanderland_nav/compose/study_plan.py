@@ -178,7 +178,7 @@ class Manifest:
             now = self._read()
             old = now.get(key, {})
             if unless_taken and old.get("hash") == entry.get("hash") and (
-                    old.get("status") == "done" or (old.get("status") == "running" and _alive(old.get("pid")))):
+                    old.get("status") == "done" or (old.get("status") == "running" and process_alive(old.get("pid")))):
                 self.entries = now
                 return False
             self.entries = {**now, key: entry}
@@ -186,7 +186,7 @@ class Manifest:
             return True
 
 
-def _alive(pid) -> bool:
+def process_alive(pid) -> bool:
     """Whether process `pid` (another study process working on a cell) still runs on this machine."""
     if not pid or pid == os.getpid():
         return False
@@ -210,7 +210,7 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
         h = digests[cell.key]
         status = manifest.status(cell.key, h)
         if status == "done" or (status == "failed" and not c.study.retry_failed) or (
-                status == "running" and _alive(manifest.entries[cell.key].get("pid"))):
+                status == "running" and process_alive(manifest.entries[cell.key].get("pid"))):
             log.info("cell %s: %s, skipped", cell.key, status)
             continue
         folder = out / "cells" / cell.kind / cell.folder_name(h)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, process_alive, cell_digests
 from wanderland_nav.compose.study_cells import eval_records
 from wanderland_nav.degrade.crosseval import fig8, table3
 from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
@@ -22,6 +22,8 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
     """Counts per status, then one line per cell that is not done (with its error), and the episodes
     each environment's navmesh yielded (a broken navmesh shows up here)."""
     status = {c.key: manifest.status(c.key, digests[c.key]) or "not run" for c in cells}
+    status = {k: "interrupted" if v == "running" and not process_alive(manifest.entries[k].get("pid")) else v
+              for k, v in status.items()}  # a killed study process leaves its cell "running"
     counts = {s: sum(v == s for v in status.values()) for s in dict.fromkeys(status.values())}
     lines = ["cells: " + ", ".join(f"{n} {s}" for s, n in counts.items()) + f" (of {len(cells)})"]
     for c in cells:
