@@ -115,7 +115,8 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
     assert c.study.presets == ["scale_1.2", "holes"] and c.study.eval_episodes == 3
     assert "debug=smoke" in c.study.train
     full = study_config(compose_config("study", ["+study=grounding"]))
-    assert sorted(full.study.presets) == ["drift", "scale_0.8", "video3dgs"] and full.study.seeds == [0, 1, 2]
+    assert sorted(full.study.presets) == ["drift", "scale_0.8", "scale_1.2", "splat_mesh", "video3dgs"]
+    assert full.study.seeds == [0, 1, 2] and full.study.trained_presets is None
     assert "algo.ppo.total_frames=4800" in full.study.train  # the recipe sizes are pinned in the study
     with pytest.raises(Exception, match="eval_episode"):
         study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
