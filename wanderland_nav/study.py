@@ -21,7 +21,7 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import StudyConfig, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, plan_cells, run_cells
+from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
 from wanderland_nav.compose.study_report import write_study_outputs
 from wanderland_nav.train import run as train_run
 
@@ -35,7 +35,8 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     out = Path(c.out)
     cells = plan_cells(c.study)
     execute = StudyCells(c, out, train_run, cells)
-    manifest = run_cells(c, cells, execute, out)
+    # report_only: the tables of what other study processes have finished so far, running no cell
+    manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}
     s = c.study
     header = (f"study {s.name} | source {execute.source().name} | seeds {list(s.seeds)} | eval split {s.eval_split}, "

@@ -24,8 +24,9 @@ def test_plan_has_every_cell_once_and_needs_come_first(tmp_path):
     cells = plan_cells(_config(tmp_path).study)
     keys = [c.key for c in cells]
     assert len(keys) == len(set(keys))
-    # 2 builds + per seed: init, grounded train, 3 fixed policies x 3 envs, per preset a train + BC, BC+RL evals
-    assert len(cells) == 2 + 2 * (2 + 9 + 2 * 3)
+    # 2 builds + per seed: init, grounded train, 3 fixed policies in grounded, per preset 3 fixed policies x
+    # 2 protocols + a train + its BC, BC+RL evals in grounded; then per seed each preset's BC+RL in each preset
+    assert len(cells) == 2 + 2 * (2 + 3 + 2 * (6 + 1 + 2)) + 2 * (2 * 2)
     seen = set()
     for c in cells:
         assert set(c.needs) <= seen, f"{c.key} planned before {set(c.needs) - seen}"
@@ -35,11 +36,27 @@ def test_plan_has_every_cell_once_and_needs_come_first(tmp_path):
     assert table3_rows == {(GROUNDED, "untrained"), *((e, ph) for e in (GROUNDED, "scale_1.2", "holes")
                                                       for ph in ("BC", "BC+RL"))}
     assert {c.env for c in evals if c.policy == (GROUNDED, "BC+RL")} == {GROUNDED, "scale_1.2", "holes"}
+    routes = [c for c in evals if c.protocol == "grounded_routes"]
+    assert {c.env for c in routes} == {"scale_1.2", "holes"} and len(routes) == 2 * 3 + 4
+    assert ("holes", "BC+RL") in {c.policy for c in routes if c.env == "scale_1.2"}
+    assert routes[0].key.endswith("@grounded_routes") and "_routes_" in routes[0].folder_name("abcdef0123")
+    # ranking_seeds: the own protocol and the degraded-trained policies in degraded envs only for seed 1
+    part = plan_cells(_config(tmp_path, ranking_seeds=[1]).study)
+    assert {c.seed for c in part if c.kind == "eval" and c.env != GROUNDED and c.protocol == "own"} == {1}
+    assert {c.seed for c in part if c.kind == "eval" and c.env != GROUNDED and c.policy[0] != GROUNDED} == {1}
+    assert {c.seed for c in part if c.kind == "eval" and c.protocol != "own" and c.policy[0] == GROUNDED} == {0, 1}
+    only = plan_cells(_config(tmp_path, trained_presets=["holes"]).study)  # scale_1.2 evaluated in, not trained in
+    assert {c.env for c in only if c.kind == "train"} == {GROUNDED, "holes"}
+    assert {c.policy[0] for c in only if c.kind == "eval"} == {GROUNDED, "holes"}
+    assert {c.env for c in only if c.protocol == "grounded_routes"} == {"scale_1.2", "holes"}
 
 
 @pytest.mark.parametrize("study, match", [(dict(presets=["drift", "drift"]), "distinct"),
                                           (dict(presets=["grounded"]), "distinct"),
-                                          (dict(fixed_policies=["BC", "PPO"]), "PPO")])
+                                          (dict(fixed_policies=["BC", "PPO"]), "PPO"),
+                                          (dict(protocols=["own", "same"]), "same"),
+                                          (dict(ranking_seeds=[7]), "not a subset"),
+                                          (dict(trained_presets=["drift"]), "not a subset")])
 def test_plan_rejects_bad_grids(tmp_path, study, match):
     with pytest.raises(ValueError, match=match):
         plan_cells(_config(tmp_path, **study).study)
@@ -53,6 +70,8 @@ def test_digests_follow_what_a_cell_depends_on(tmp_path):
     assert changed["build/holes/seed0"] == base["build/holes/seed0"]  # the scenes do not depend on the recipe
     assert changed["train/holes/seed0"] != base["train/holes/seed0"]
     assert changed["eval/grounded/seed0/holes:BC+RL"] != base["eval/grounded/seed0/holes:BC+RL"]
+    own, routes = "eval/holes/seed0/grounded:BC", "eval/holes/seed0/grounded:BC@grounded_routes"
+    assert base[own] != base[routes]  # the protocol is an input of the evaluation
     reseeded = dataclasses.replace(c, study=dataclasses.replace(c.study, degrade_seed=5))
     moved = cell_digests(reseeded, plan_cells(reseeded.study))
     assert "build/holes/seed5" in moved and moved["train/holes/seed0"] != base["train/holes/seed0"]
@@ -71,7 +90,9 @@ def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
         return {"ok": cell.key}
 
     m = run_cells(c, cells, execute, tmp_path)
-    assert len(calls) == len(cells) - 2  # the two evals of the holes-trained policy are blocked
+    holes_trained = [c.key for c in cells if c.policy is not None and c.policy[0] == "holes"]
+    assert len(holes_trained) == 4  # BC, BC+RL in grounded; BC+RL on the grounded routes in scale_1.2 and holes
+    assert len(calls) == len(cells) - len(holes_trained)  # its evaluations are blocked
     assert m.entries["train/holes/seed0"]["status"] == "failed"
     assert "only {'test': 0} episodes" in m.entries["train/holes/seed0"]["error"]
     assert m.entries["eval/grounded/seed0/holes:BC"]["blocked_by"] == ["train/holes/seed0"]
@@ -83,7 +104,7 @@ def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
 
     retry = dataclasses.replace(c, study=dataclasses.replace(c.study, retry_failed=True))
     m = run_cells(retry, cells, lambda cell, folder: calls.append(cell.key) or {}, tmp_path)
-    assert calls == ["train/holes/seed0", "eval/grounded/seed0/holes:BC", "eval/grounded/seed0/holes:BC+RL"]
+    assert calls == ["train/holes/seed0", *holes_trained]
     assert all(e["status"] == "done" for e in m.entries.values())
 
 
@@ -95,6 +116,8 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
     assert "debug=smoke" in c.study.train
     full = study_config(compose_config("study", ["+study=grounding"]))
     assert sorted(full.study.presets) == ["drift", "scale_0.8", "scale_1.2", "splat_mesh", "video3dgs"]
+    assert full.study.seeds == [0, 1, 2] and full.study.trained_presets is None
+    assert "algo.ppo.total_frames=4800" in full.study.train  # the recipe sizes are pinned in the study
     with pytest.raises(Exception, match="eval_episode"):
         study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
 

@@ -23,8 +23,13 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
     assert {e["status"] for e in manifest.values()} == {"done"}, {k: e for k, e in manifest.items()
                                                                   if e["status"] != "done"}
     table = written["table"].read_text()
-    assert "Table 3 analogue" in table and "scale_1.2 BC - grounded BC" in table
+    assert "Table 3 analogue" in table and "scale_1.2 BC+RL - grounded BC+RL" in table
     assert "-- in holes" in table and "episodes in scale_1.2" in table
+    assert "SAME ROUTES" in table and "grounded routes kept" in table and "misranking test" in table
+    routes = json.loads(next((out / "cells" / "eval").glob("holes_grounded-BC_routes_seed0_*/result.json")).read_text())
+    assert all(r["episode_id"] in {e["episode_id"] for e in json.loads(next((out / "routes").glob("routes_holes*"))
+                                                                         .read_text())["episodes"]}
+               for r in routes["records"])
     assert written["chart"].stat().st_size > 10_000 and written["recording"].stat().st_size > 10_000
     result = json.loads(next((out / "cells" / "eval").glob("holes_grounded-BC_seed0_*/result.json")).read_text())
     assert len(result["records"]) == 3 and "holes" in result["episodes_file"]

@@ -18,7 +18,7 @@ import torch
 from omegaconf import OmegaConf
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.study_config import StudyConfig
+from wanderland_nav.compose.study_config import PROTOCOLS, StudyConfig
 from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
 
 log = logging.getLogger("wanderland_nav.study")
@@ -149,7 +149,19 @@ class StudyCells:
         s = self.c.study
         ckpt = self.cell_dir(self.needs_producer(cell)) / CHECKPOINTS[cell.policy[1]]
         scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
-        n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
+        routes = {}
+        if cell.protocol == "grounded_routes":  # the grounded test routes mapped into this env (counted drops)
+            from wanderland_nav.compose.study_routes import grounded_routes_file
+
+            grounded = self.env_episodes(GROUNDED, cell.seed)[1]
+            episodes, routes = grounded_routes_file(grounded, s.eval_split, s.eval_episodes, scene, self.out / "routes")
+            n = routes["kept"]
+            if n == 0:  # a finding (every grounded route is infeasible here), counted in the table, not a failure
+                atomic_write_json(folder / "result.json", {"cell": cell.key, "checkpoint": str(ckpt), "records": [],
+                                                           "routes": routes})
+                return {"episodes": 0, "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}}
+        else:
+            n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
         _, results, table = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
                                                 num_episodes=n, batch_size=min(s.eval_batch_size, n),
                                                 device=self.c.device, seed=cell.seed)
@@ -157,7 +169,8 @@ class StudyCells:
         atomic_write_json(folder / "result.json", {"cell": cell.key, "checkpoint": str(ckpt), "episodes_file":
                                                    str(episodes), "records": res.records, "summary": res.summary})
         log.info("%s:\n%s", cell.key, table)
-        return {m: res.summary["overall"][m] for m in ("SR", "IR", "NE", "SPL", "episodes")}
+        info = {m: res.summary["overall"][m] for m in ("SR", "IR", "NE", "SPL", "episodes")}
+        return {**info, "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}} if routes else info
 
     def needs_producer(self, cell: Cell) -> str:
         return cell.needs[0]  # study_plan._eval puts the policy's producer first
@@ -176,11 +189,16 @@ def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
     return have if wanted is None else min(have, wanted)
 
 
-def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> dict[tuple, list[dict]]:
-    """(eval env, seed, trained-in env, phase) -> per-episode records of every eval cell done with its hash."""
-    out = {}
+def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> dict[str, dict[tuple, list[dict]]]:
+    """protocol -> (eval env, seed, trained-in env, phase) -> per-episode records of every eval cell done
+    with its hash. The grounded env has one episode set, so its records also stand in the
+    "grounded_routes" protocol."""
+    out: dict[str, dict[tuple, list[dict]]] = {p: {} for p in PROTOCOLS}
     for cell in cells:
         e = manifest.entries.get(cell.key)
         if cell.kind == "eval" and manifest.status(cell.key, digests[cell.key]) == "done":
-            out[(cell.env, cell.seed, *cell.policy)] = json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
+            recs = json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
+            out[cell.protocol][(cell.env, cell.seed, *cell.policy)] = recs
+            if cell.env == GROUNDED:
+                out["grounded_routes"][(cell.env, cell.seed, *cell.policy)] = recs
     return out

@@ -13,6 +13,8 @@ from typing import Any, Dict, List, Optional
 
 #: the phases a training run leaves a checkpoint for (`rl/recipe.py`: `bc.pt`, `last.pt`), and the random init
 POLICY_PHASES = ("untrained", "BC", "BC+RL")
+#: how a degraded environment is evaluated (Fig. 8): on its own test episodes, or on the grounded ones mapped into it
+PROTOCOLS = ("own", "grounded_routes")
 
 
 @dataclass
@@ -26,6 +28,14 @@ class StudyGroup:
     train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])  # `train` overrides: the recipe sizes
     fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
     table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
+    # Fig. 8 in a degraded env: "own" = its own test episodes; "grounded_routes" = the grounded test episodes
+    # mapped into its frame (the paper's protocol, `compose/study_routes.py`); the grounded env has one set
+    protocols: List[str] = field(default_factory=lambda: list(PROTOCOLS))
+    ranked_phases: List[str] = field(default_factory=lambda: ["BC+RL"])  # degraded-trained policies added to the
+    # Fig.-8 ranking (evaluated on the grounded routes in every env), so Kendall tau has more than 3 policies
+    trained_presets: Optional[List[str]] = None  # presets BC+PPO is trained in (Table 3); null: all. The others are
+    # only evaluated in (Fig. 8), which costs a fraction of a training
+    ranking_seeds: Optional[List[int]] = None  # seeds with the full Fig.-8 grid (own protocol + ranked_phases); null: all
     eval_split: str = "test"
     eval_episodes: Optional[int] = None  # null: every episode of the split
     eval_batch_size: int = 10
@@ -50,6 +60,7 @@ class StudyConfig:
     source: SourceScene = field(default_factory=SourceScene)
     out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
     threads: Optional[int] = None  # torch intra-op threads for every cell
+    report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
 

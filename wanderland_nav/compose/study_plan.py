@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -27,7 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.study_config import POLICY_PHASES, StudyConfig, StudyGroup
+from wanderland_nav.compose.study_config import POLICY_PHASES, PROTOCOLS, StudyConfig, StudyGroup
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -42,15 +43,18 @@ class Cell:
     seed: int  # the training seed (the degradation seed for `build`)
     policy: tuple[str, str] | None = None  # eval: (environment trained in, phase in POLICY_PHASES)
     needs: tuple[str, ...] = field(default=(), compare=False)  # keys of cells that must be done first
+    protocol: str = "own"  # eval: the env's own test episodes, or "grounded_routes" (study_routes.py)
 
     @property
     def key(self) -> str:
         what = f"{self.kind}/{self.env}/seed{self.seed}"
-        return what if self.policy is None else f"{what}/{self.policy[0]}:{self.policy[1]}"
+        what = what if self.policy is None else f"{what}/{self.policy[0]}:{self.policy[1]}"
+        return what if self.protocol == "own" else f"{what}@{self.protocol}"
 
     def folder_name(self, digest: str) -> str:
         pol = "" if self.policy is None else f"_{self.policy[0]}-{self.policy[1].replace('+', '_')}"
-        return f"{self.env}{pol}_seed{self.seed}_{digest[:8]}"
+        routes = "" if self.protocol == "own" else "_routes"
+        return f"{self.env}{pol}{routes}_seed{self.seed}_{digest[:8]}"
 
 
 def _producer(policy: tuple[str, str], seed: int) -> str:
@@ -59,35 +63,60 @@ def _producer(policy: tuple[str, str], seed: int) -> str:
     return Cell("init", GROUNDED, seed).key if phase == "untrained" else Cell("train", env, seed).key
 
 
-def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int) -> Cell:
+def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int, protocol: str = "own") -> Cell:
     needs = (_producer(policy, seed),) + (() if env == GROUNDED else (Cell("build", env, degrade_seed).key,))
-    return Cell("eval", env, seed, policy, needs)
+    return Cell("eval", env, seed, policy, needs, protocol)
 
 
-def plan_cells(s: StudyGroup) -> list[Cell]:
-    """Every cell in run order: builds; then per seed the untrained init, the grounded training and the
-    fixed (grounded-trained) policies in the grounded environment; then per degraded environment the
-    fixed policies in it (its Fig.-8 column), its own training and that policy in the grounded
-    environment (its Table-3 rows), so a study cut short has whole environments, not half of each."""
+def _check_grid(s: StudyGroup) -> None:
     if len(set(s.presets)) != len(s.presets) or GROUNDED in s.presets:
         raise ValueError(f"study.presets={s.presets}: names must be distinct and not {GROUNDED!r}")
     for what, phases, allowed in (("fixed_policies", s.fixed_policies, POLICY_PHASES),
-                                  ("table3_phases", s.table3_phases, POLICY_PHASES[1:])):
+                                  ("table3_phases", s.table3_phases, POLICY_PHASES[1:]),
+                                  ("ranked_phases", s.ranked_phases, POLICY_PHASES[1:]),
+                                  ("protocols", s.protocols, PROTOCOLS)):
         bad = [p for p in phases if p not in allowed]
         if bad:
             raise ValueError(f"study.{what}: {bad} not among {', '.join(allowed)}")
+    if s.trained_presets is not None and not set(s.trained_presets) <= set(s.presets):
+        raise ValueError(f"study.trained_presets={s.trained_presets}: not a subset of study.presets={s.presets}")
+    if s.ranking_seeds is not None and not set(s.ranking_seeds) <= set(s.seeds):
+        raise ValueError(f"study.ranking_seeds={s.ranking_seeds}: not a subset of study.seeds={s.seeds}")
+
+
+def plan_cells(s: StudyGroup) -> list[Cell]:
+    """Every cell in run order, most important first, so a study cut short has whole results:
+    builds; then per seed the untrained init, the grounded training and the fixed (grounded-trained)
+    policies in the grounded environment; then per degraded environment the fixed policies on the
+    grounded routes mapped into it (its Fig.-8 column), its own training and that policy in the
+    grounded environment (its Table-3 rows; only for `trained_presets`). Last, for `ranking_seeds`: every degraded-trained
+    `ranked_phases` policy on the grounded routes of every degraded env (the extra policies of the
+    misranking test; they need every training), then the fixed policies on each env's OWN episodes."""
+    _check_grid(s)
     cells = [Cell("build", p, s.degrade_seed) for p in s.presets]
+    routes = "grounded_routes" in s.protocols
+    trained = [p for p in s.presets if s.trained_presets is None or p in s.trained_presets]
     for seed in s.seeds:
         cells += [Cell("init", GROUNDED, seed), Cell("train", GROUNDED, seed)]
         cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
         cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.table3_phases
                   if ph not in s.fixed_policies]
         for env in s.presets:
-            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
-            cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
-            cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
+            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed, "grounded_routes")
+                      for ph in s.fixed_policies if routes]
+            if env in trained:
+                cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
+                cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
         if "untrained" not in s.fixed_policies:  # the Table-3 reference row
             cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s.degrade_seed))
+    for seed in (s.seeds if s.ranking_seeds is None else s.ranking_seeds):
+        if routes:
+            cells += [_eval(env, seed, (t, ph), s.degrade_seed, "grounded_routes") for env in s.presets
+                      for t in trained for ph in s.ranked_phases]
+            cells += [_eval(GROUNDED, seed, (t, ph), s.degrade_seed) for t in trained
+                      for ph in s.ranked_phases if ph not in s.table3_phases]
+        if "own" in s.protocols:
+            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for env in s.presets for ph in s.fixed_policies]
     return cells
 
 
@@ -101,7 +130,8 @@ def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
         return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
     if cell.kind in ("init", "train"):
         return {"source": source, "train": list(s.train), "device": c.device}
-    return {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train)}
+    own = {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train)}
+    return own if cell.protocol == "own" else {**own, "protocol": cell.protocol}
 
 
 def cell_digests(c: StudyConfig, cells: list[Cell]) -> dict[str, str]:
@@ -117,20 +147,56 @@ def cell_digests(c: StudyConfig, cells: list[Cell]) -> dict[str, str]:
 
 
 class Manifest:
-    """`<out>/done.json`: key -> {hash, status (done | failed | blocked), dir, seconds, info | error}.
-    Rewritten atomically after every cell, so a killed study loses at most the cell it was running."""
+    """`<out>/done.json`: key -> {hash, status (done | failed | blocked | running), dir, seconds, info | error}.
+    Rewritten atomically after every cell, so a killed study loses at most the cell it was running.
+
+    Several study processes may share one `out` (e.g. one per seed on a multi-core box): `record` merges
+    into the file as it is now under an exclusive lock, and `status` re-reads it, so one process sees the
+    cells another finished; a cell another live process is running (`running` with its pid) is skipped.
+    Two processes can therefore work through the same plan, e.g. one in reverse preset order."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
-        self.entries: dict[str, dict] = json.loads(self.path.read_text()) if self.path.is_file() else {}
+        self.entries: dict[str, dict] = self._read()
+
+    def _read(self) -> dict[str, dict]:
+        return json.loads(self.path.read_text()) if self.path.is_file() else {}
 
     def status(self, key: str, digest: str) -> str | None:
+        self.entries = self._read() or self.entries
         e = self.entries.get(key)
         return e["status"] if e is not None and e.get("hash") == digest else None
 
-    def record(self, key: str, entry: dict) -> None:
-        self.entries[key] = entry
-        atomic_write_json(self.path, self.entries)
+    def record(self, key: str, entry: dict, *, unless_taken: bool = False) -> bool:
+        """Write `entry` for `key`; with `unless_taken`, only when no other live process has claimed or
+        finished the cell with the same hash meanwhile (check and write under one lock). -> written."""
+        import fcntl
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.path.with_suffix(".lock"), "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            now = self._read()
+            old = now.get(key, {})
+            if unless_taken and old.get("hash") == entry.get("hash") and (
+                    old.get("status") == "done" or (old.get("status") == "running" and process_alive(old.get("pid")))):
+                self.entries = now
+                return False
+            self.entries = {**now, key: entry}
+            atomic_write_json(self.path, self.entries)
+            return True
+
+
+def process_alive(pid) -> bool:
+    """Whether process `pid` (another study process working on a cell) still runs on this machine."""
+    if not pid or pid == os.getpid():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path], dict], out: Path) -> Manifest:
@@ -143,7 +209,8 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
     for cell in cells:
         h = digests[cell.key]
         status = manifest.status(cell.key, h)
-        if status == "done" or (status == "failed" and not c.study.retry_failed):
+        if status == "done" or (status == "failed" and not c.study.retry_failed) or (
+                status == "running" and process_alive(manifest.entries[cell.key].get("pid"))):
             log.info("cell %s: %s, skipped", cell.key, status)
             continue
         folder = out / "cells" / cell.kind / cell.folder_name(h)
@@ -153,6 +220,10 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
             manifest.record(cell.key, {"hash": h, "status": "blocked", "dir": str(folder), "blocked_by": blocked})
             continue
         log.info("cell %s -> %s", cell.key, folder)
+        if not manifest.record(cell.key, {"hash": h, "status": "running", "dir": str(folder), "pid": os.getpid()},
+                               unless_taken=True):
+            log.info("cell %s: taken by another study process, skipped", cell.key)
+            continue
         t0 = time.perf_counter()
         try:
             folder.mkdir(parents=True, exist_ok=True)

@@ -10,9 +10,10 @@ from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, process_alive, cell_digests
 from wanderland_nav.compose.study_cells import eval_records
 from wanderland_nav.degrade.crosseval import fig8, table3
+from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -21,6 +22,8 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
     """Counts per status, then one line per cell that is not done (with its error), and the episodes
     each environment's navmesh yielded (a broken navmesh shows up here)."""
     status = {c.key: manifest.status(c.key, digests[c.key]) or "not run" for c in cells}
+    status = {k: "interrupted" if v == "running" and not process_alive(manifest.entries[k].get("pid")) else v
+              for k, v in status.items()}  # a killed study process leaves its cell "running"
     counts = {s: sum(v == s for v in status.values()) for s in dict.fromkeys(status.values())}
     lines = ["cells: " + ", ".join(f"{n} {s}" for s, n in counts.items()) + f" (of {len(cells)})"]
     for c in cells:
@@ -31,7 +34,7 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
             info = e["info"]
             ppo = info.get("ppo_policy_updates")
             lines.append(f"  episodes in {c.env} (seed {c.seed}): {info['episodes']} of {info['asked']} asked, "
-                         f"trained in {e['seconds']:.0f}s" + ("" if ppo is None else f", {ppo} PPO policy updates"))
+                         f"cell {e['seconds']:.0f}s (a resumed run counts its remainder)" + ("" if ppo is None else f", {ppo} PPO policy updates"))
     return lines
 
 
@@ -45,10 +48,28 @@ def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: 
     digests = cell_digests(c, cells)
     records = eval_records(manifest, cells, digests)
     envs = [GROUNDED, *s.presets]
-    f8_text, chart = fig8(records, envs, s.fixed_policies, s.seeds, metric=s.rank_metric,
-                          resamples=s.bootstrap_resamples)
-    text = "\n\n".join([header, "\n".join(cell_status_lines(manifest, cells, digests)),
-                        table3(records, envs, s.seeds), f8_text])
+    ranking = list(s.seeds if s.ranking_seeds is None else s.ranking_seeds)
+    parts = [header, "\n".join(cell_status_lines(manifest, cells, digests)), table3(records["own"], envs, s.seeds)]
+    chart = {}
+    if "grounded_routes" in s.protocols:
+        routes = {c_.env: manifest.entries[c_.key]["info"]["routes"] for c_ in cells
+                  if c_.protocol == "grounded_routes" and manifest.status(c_.key, digests[c_.key]) == "done"}
+        fixed = [(GROUNDED, ph) for ph in s.fixed_policies]
+        text, chart, _ = fig8_same_routes(records["grounded_routes"], envs, fixed, s.seeds, routes,
+                                          metric=s.rank_metric, resamples=s.bootstrap_resamples)
+        parts.append(f"[grounded-trained policies, seeds {list(s.seeds)}]\n" + text)
+        ranked = fixed + [(e, ph) for e in s.presets for ph in s.ranked_phases
+                          if s.trained_presets is None or e in s.trained_presets]
+        if len(ranked) > len(fixed):
+            text, _, _ = fig8_same_routes(records["grounded_routes"], envs, ranked, ranking, routes,
+                                          metric=s.rank_metric, resamples=s.bootstrap_resamples)
+            parts.append(f"[misranking test: grounded- and degraded-trained policies, seeds {ranking}]\n" + text)
+    if "own" in s.protocols:
+        own_text, own_chart = fig8(records["own"], envs, s.fixed_policies, ranking, metric=s.rank_metric,
+                                   resamples=s.bootstrap_resamples)
+        parts.append(f"[each environment's OWN test episodes, seeds {ranking}]\n" + own_text)
+        chart = chart if any(chart.values()) else own_chart
+    text = "\n\n".join(parts)
     written = {"table": out / "table.txt"}
     atomic_write_text(written["table"], text + "\n")
     if any(chart.values()):

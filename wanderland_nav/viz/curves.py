@@ -54,8 +54,8 @@ def write_learning_curves(run_dir: Path, evals: dict[str, tuple[int, dict]], out
             ax.plot([p[0] for p in pts], [p[1] for p in pts], ".-", color="0.55", label="training rollouts")
         if column is not None:
             for i, (name, (frames, est)) in enumerate(evals.items()):
-                e = est[column]
-                ax.errorbar([frames], [e.value], yerr=[[e.value - e.low], [e.high - e.value]], fmt="o", capsize=4,
+                e = est[column]  # an interval end can sit 1 ulp inside the value (SR 1.0): no negative bar
+                ax.errorbar([frames], [e.value], yerr=[[max(e.value - e.low, 0.0)], [max(e.high - e.value, 0.0)]], fmt="o", capsize=4,
                             color=f"C{i}", label=f"{name} (eval, 95% CI)")
         ax.set_title(title)
         ax.set_xlabel("PPO environment frames")

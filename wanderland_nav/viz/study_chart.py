@@ -36,6 +36,7 @@ def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[
             est = [chart[m].get(env, {}).get(pol) for env in envs]
             val = np.array([e.value if e is not None else np.nan for e in est])
             err = np.array([[e.value - e.low, e.high - e.value] if e is not None else [0, 0] for e in est]).T
+            err = np.clip(err, 0.0, None)  # an interval end can sit 1 ulp inside the value (SR 1.0)
             ax.bar(x + (k - (len(policies) - 1) / 2) * width, val, width, yerr=err, capsize=3, label=pol,
                    color=f"C{k}")
         ax.set_xticks(x, envs, rotation=25, ha="right", fontsize=8)
