@@ -60,3 +60,12 @@ def test_iqm_and_seed_aggregate():
     assert single == wilson_interval(3, 4)
     multi = rate_interval([[1, 1, 1, 1], [0, 0, 0, 0]])  # seeds disagree completely: the interval shows it
     assert multi.value == 0.5 and multi.low == 0.0 and multi.high == 1.0
+
+
+def test_rate_interval_over_seeds_is_never_narrower_than_wilson_on_the_pooled_outcomes():
+    # 3 seeds x 1 route, all successes: the bootstrap alone gives the zero-width [1, 1]
+    est = rate_interval([[1], [1], [1]])
+    pooled = wilson_interval(3, 3)
+    assert est.value == 1.0 and est.high == 1.0
+    assert est.low == pytest.approx(pooled.low) and est.low < 0.5
+    assert (est.n, est.seeds) == (1, 3)

@@ -132,8 +132,15 @@ def seed_aggregate(scores, confidence: float = 0.95, *, num_resamples: int = NUM
 
 
 def rate_interval(successes, confidence: float = 0.95, *, seed: int = 0) -> Estimate:
-    """Success rate of `[N]` (Wilson) or `[S, N]` 0/1 outcomes (two-level bootstrap: seeds differ as runs)."""
+    """Success rate of `[N]` (Wilson) or `[S, N]` 0/1 outcomes (two-level bootstrap: seeds differ as runs).
+
+    For `[S, N]` the interval is the envelope of the bootstrap's and Wilson's on the S*N pooled outcomes:
+    a bootstrap cannot show uncertainty it never resamples (3 seeds x 1 route, all successes, gave the
+    zero-width [1.0, 1.0]), while Wilson keeps the width that S*N coin flips must have.
+    """
     x = _as_matrix(successes)
     if x.shape[0] == 1:
         return wilson_interval(int(x.sum()), x.shape[1], confidence)
-    return bootstrap_interval(x, confidence, seed=seed)
+    boot = bootstrap_interval(x, confidence, seed=seed)
+    pooled = wilson_interval(int(x.sum()), x.numel(), confidence)
+    return Estimate(boot.value, min(boot.low, pooled.low), max(boot.high, pooled.high), boot.n, boot.seeds)

@@ -39,7 +39,9 @@ def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[
             err = np.clip(err, 0.0, None)  # an interval end can sit 1 ulp inside the value (SR 1.0)
             ax.bar(x + (k - (len(policies) - 1) / 2) * width, val, width, yerr=err, capsize=3, label=pol,
                    color=f"C{k}")
-        ax.set_xticks(x, envs, rotation=25, ha="right", fontsize=8)
+        # the sample behind each group (episodes x seeds): a bar over 1 route must not pass for one over 60
+        n = [max((e.n for e in chart[m].get(env, {}).values()), default=0) for env in envs]
+        ax.set_xticks(x, [f"{env}\n(n={k})" for env, k in zip(envs, n)], rotation=25, ha="right", fontsize=8)
         ax.set_ylim(0, 1)
         ax.set_title(f"{m} (95 % CI)")
         ax.grid(axis="y", alpha=0.3)
