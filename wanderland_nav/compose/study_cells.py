@@ -132,11 +132,8 @@ class StudyCells:
             raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {t.episodes.num}); "
                                "too few to train and evaluate")
         ppo = t.algo.ppo
+        # recorded beside the rows (a budget with no policy update is refused by PPOConfig before we get here)
         updates = max(0, -(-ppo.total_frames // ppo.frames_per_batch) - ppo.critic_warmup_iters) if ppo.enabled else 0
-        if ppo.enabled and updates == 0:
-            log.warning("%s: algo.ppo.total_frames=%d is all critic warm-up (%d iteration(s) of %d frames): PPO "
-                        "makes no policy update, so BC+RL is the BC policy", cell.key, ppo.total_frames,
-                        ppo.critic_warmup_iters, ppo.frames_per_batch)
         rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
         return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
                 "ppo_policy_updates": updates,
