@@ -170,7 +170,7 @@ def main() -> None:
         trainer.iteration = trainer.cfg.critic_warmup_iters  # the measured batch updates the actor
         flat, adv = advantages(trainer, batch)
         print(f"\n## action_dist={dist}, checkpoint {a.checkpoint}, seed {a.seed}, std "
-              f"{float(trainer.std_owner.scale().mean()):.3f}, critic warm-up {a.warmup} batches")
+              f"{float(trainer.std_owner.scale().detach().mean()):.3f}, critic warm-up {a.warmup} batches")
         if dist == "waypoints":
             per_waypoint(trainer, kin, flat, adv)
         else:
