@@ -53,6 +53,25 @@ def _sortable_int(x: torch.Tensor) -> torch.Tensor:
     return torch.where(b < 0, b ^ 0x7FFFFFFF, b)
 
 
+RADIX_MIN = 1 << 15  # torch's CPU sort switches to a radix sort from this many elements on (torch 2.13)
+PAD_TO_RADIX = 1 << 13  # integer keys from this many elements on are padded up to RADIX_MIN
+
+
+def stable_sort(keys: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """`torch.sort(keys, stable=True)` for 1-D integer keys, padded to the radix-sort size on CPU.
+
+    Why: below 2^15 elements torch's CPU sort is a comparison sort (~70 ns per key), from 2^15 on a
+    radix sort (~13 ns per int32 key): measured 1.9 ms for 27k int32 keys vs 0.42 ms for 32,768, 1
+    thread. The env's per-group binning sorts 10^4-3*10^4 keys, so sorting them padded with the
+    dtype's largest value (stable: pads land after every real key) is ~4x cheaper; same result."""
+    n = keys.numel()
+    if keys.device.type != "cpu" or not PAD_TO_RADIX <= n < RADIX_MIN or keys.is_floating_point():
+        return torch.sort(keys, stable=True)
+    padded = torch.cat([keys, keys.new_full((RADIX_MIN - n,), torch.iinfo(keys.dtype).max)])
+    values, indices = torch.sort(padded, stable=True)
+    return values[:n], indices[:n]
+
+
 def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, tile_size: int,
                 tile_width: int, tile_height: int):
     """Sorted (tile, depth) intersection lists for all cameras.
@@ -99,7 +118,7 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         # Visit Gaussians in depth order (exact: integer radix sort of the float bits, stable on ties),
         # expand each into its covered tiles, then a *stable* sort by tile id (a small integer key)
         # keeps depth order inside every tile. Two cheap radix sorts instead of one on wide keys.
-        order = torch.sort(_sortable_int(depths.detach()), stable=True).indices
+        order = stable_sort(_sortable_int(depths.detach()))[1]
         cnt_o = cnt.index_select(0, order)
         first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
         rows = None
@@ -109,7 +128,7 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         # narrower keys: the stable sort of all tile entries is the binning's largest cost
         key_dtype = torch.int16 if num_tiles < 2**15 else torch.int32 if num_tiles < 2**31 else torch.int64
         tile = tile.to(key_dtype)
-        tile, perm = torch.sort(tile, stable=True)
+        tile, perm = stable_sort(tile)
         ent = order.index_select(0, src.index_select(0, perm))
         counts = torch.bincount(tile.to(torch.int32), minlength=num_tiles)
     return ent, counts
