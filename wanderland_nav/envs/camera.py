@@ -19,6 +19,7 @@ import torch
 
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
+from planners.threads import intra_op_threads
 from wanderland_nav.render.shards import map_single_threaded
 
 Renderer = Callable[..., object]
@@ -50,6 +51,7 @@ class AgentCamera:
         self.renderer = renderer
         self.gaussians = gaussians
         self.background = torch.tensor(cfg.background, dtype=torch.float32, device=self.device)
+        self.caller_threads: int | None = None  # set by NavEnv while its own ops run on one intra-op thread
 
     def cam_from_world(self, position_nav: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
         """position_nav `[B, 3]` (feet), yaw `[B]` -> `cam_from_world [B, 4, 4]` in the scene frame."""
@@ -63,8 +65,11 @@ class AgentCamera:
         return invert_rigid(world_from_cam)
 
     def workers(self) -> int:
-        """Threads that render groups concurrently: `render_threads`, else torch's intra-op thread count."""
-        return self.cfg.render_threads if self.cfg.render_threads is not None else torch.get_num_threads()
+        """Threads that render groups concurrently: `render_threads`, else the intra-op thread count of the
+        env's caller (`caller_threads`, set while the env runs its own ops on one), else torch's."""
+        if self.cfg.render_threads is not None:
+            return self.cfg.render_threads
+        return self.caller_threads if self.caller_threads is not None else torch.get_num_threads()
 
     @torch.no_grad()
     def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
@@ -89,9 +94,10 @@ class AgentCamera:
         render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
         if self.device.type == "cpu" and self.cfg.render_backend == "torch":
             map_single_threaded(render_group, groups, self.workers())
-        else:  # GPU and compiled kernels schedule their own threads
-            for g in groups:
-                render_group(g)
+        else:  # GPU and compiled kernels schedule their own threads (on CPU: the caller's intra-op threads)
+            with intra_op_threads(self.workers() if self.device.type == "cpu" else torch.get_num_threads()):
+                for g in groups:
+                    render_group(g)
         return rgb, depth
 
     def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int):
