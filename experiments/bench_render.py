@@ -204,18 +204,26 @@ def main() -> None:
     ap.add_argument("--max-gaussians", type=int, default=None)
     ap.add_argument("--psnr", type=int, default=None, help="compiled vs eager PSNR at this size on the real splats")
     ap.add_argument("--groups", action="store_true", help="with --env: cost of rendering the cameras in groups")
+    ap.add_argument("--dump-views", default=None, help="with --env: save the env cameras + Gaussians to this .pt")
+    ap.add_argument("--views", default=None, help="render a --dump-views file (any code version: old vs new "
+                                                  "renderer on identical poses) in groups of --sizes cameras")
+    ap.add_argument("--sizes", default="4,8", help="cameras per call for --views")
     ap.add_argument("--_child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a._child:
         print(json.dumps(_child(json.loads(a._child))))
         return
-    if a.env or a.psnr:
+    if a.env or a.psnr or a.views:
         import torch
 
         torch.set_num_threads(a.threads)
         print(f"threads={a.threads}; load avg {os.getloadavg()}")
-        from render_env_profile import env_profile, group_costs, splat_psnr
-        if a.env and a.groups:
+        from render_env_profile import dump_views, env_profile, group_costs, splat_psnr, views_costs
+        if a.views:
+            views_costs(a.views, [int(x) for x in a.sizes.split(",")], a.repeat)
+        elif a.env and a.dump_views:
+            dump_views(a.batch, a.res, a.max_gaussians, a.dump_views)
+        elif a.env and a.groups:
             group_costs(a.batch, a.res, a.max_gaussians, a.repeat)
         elif a.env:
             env_profile(a.batch, a.res, a.max_gaussians, a.repeat, a.compiled)
