@@ -55,8 +55,9 @@ log = logging.getLogger(__name__)
 def _one_intra_op_thread(method):
     """Run an env call, TorchRL's bookkeeping included, on one intra-op thread: apart from rendering, all
     its work is small `[B]` / `[B, T, H, W, 3]` tensor ops, which a thread pool only slows down, and on
-    a loaded machine by milliseconds per op (`planners/threads.py`). The camera still renders on the
-    caller's thread count (`AgentCamera.caller_threads`: its groups on that many threads). Measured in
+    a loaded machine by milliseconds per op (`planners/threads.py`). The camera's render groups run on
+    their own threads (`AgentCamera.workers`: one intra-op thread each; a compiled or GPU backend gets the
+    caller's intra-op count back, `AgentCamera.caller_threads`). Measured in
     `experiments/env/README.md` (2026-11-24, fourth pass). Nested entry points (`step_and_maybe_reset`
     calls `step`) keep the outermost caller's count."""
 
