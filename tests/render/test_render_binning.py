@@ -40,7 +40,7 @@ def _sigma_on_grid(means2d, conics, x0, y0, dx, dy, steps: int):
 
 def test_tile_test_is_the_exact_minimum_over_the_tile_rectangle():
     means2d, conics, opac, x0, y0, dx, dy = _random_entries(1500)
-    rows = _tile_test_rows(means2d, x0, y0, conics, opac, TS).t().contiguous()
+    rows = _tile_test_rows(means2d, x0, y0, conics, opac, TS)
     kept = _touches_tile(rows, dx, dy, TS)
     limit = torch.log(opac / ALPHA_MIN)
     at_centres = _sigma_on_grid(means2d, conics, x0, y0, dx, dy, TS)

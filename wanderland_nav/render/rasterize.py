@@ -123,7 +123,7 @@ def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, 
         first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
         rows = None
         if conics is not None:
-            rows = _tile_test_rows(m, x0, y0, conics, opacities, tile_size).index_select(0, order).t().contiguous()
+            rows = _tile_test_rows(m, x0, y0, conics, opacities, tile_size).index_select(1, order)  # [8, V]
         tile, src = _expand_to_tiles(cnt_o, wx.index_select(0, order), first_tile, rows, tile_width, tile_size)
         # narrower keys: the stable sort of all tile entries is the binning's largest cost
         key_dtype = torch.int16 if num_tiles < 2**15 else torch.int32 if num_tiles < 2**31 else torch.int64
@@ -167,14 +167,14 @@ def _expand_to_tiles(cnt: torch.Tensor, wx: torch.Tensor, first_tile: torch.Tens
 
 
 def _tile_test_rows(means2d, x0, y0, conics, opacities, tile_size: int) -> torch.Tensor:
-    """Per-Gaussian constants of `_touches_tile`, [V, 8]: the first box tile's first pixel centre minus
+    """Per-Gaussian constants of `_touches_tile`, [8, V] (contiguous rows): the first box tile's first pixel centre minus
     the mean (ox, oy), a/2, c/2, b, -b/c, -b/a and log(255 o) + 1e-3 (a 1e-3 margin in log space, so
     float rounding never drops an entry that the composite would keep)."""
     a, b, c = conics.detach().unbind(1)
     ox = x0.to(a.dtype) * tile_size + 0.5 - means2d[:, 0]
     oy = y0.to(a.dtype) * tile_size + 0.5 - means2d[:, 1]
     return torch.stack([ox, oy, 0.5 * a, 0.5 * c, b, -b / c, -b / a,
-                        torch.log(opacities.detach() * 255.0) + 1e-3], 1)
+                        torch.log(opacities.detach() * 255.0) + 1e-3], 0)
 
 
 def _touches_tile(rows: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, tile_size: int) -> torch.Tensor:
