@@ -149,7 +149,11 @@ def main():
     scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.compete)]
     try:
-        print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
+        from wanderland_nav.envs.camera import available_cores
+
+        render_threads = args.render_threads or available_cores()
+        print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads "
+              f"({render_threads} render threads), "
               f"{args.steps} timed steps after 1 warm-up, {args.compete} competing busy loops, "
               f"load average {os.getloadavg()[0]:.2f}")
         cols = ["B", "res", "fps", "fps_med", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
