@@ -2,11 +2,17 @@
 
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
                                     [--device cpu|cuda] [--threads 2] [--max-gaussians 10000] [--no-off]
-                                    [--compete 0] [--repeats 1]
+                                    [--compete 0] [--repeats 1] [--render-threads N] [--policy citywalker]
 
 `--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
 CPU-bound busy-loop processes for the duration (the "other jobs on the machine" case); they are ended
 at exit. `--repeats R` times each row R times and prints the best and the median.
+`--render-threads N` sets `camera.render_threads` (default: the CPU cores; before 2026-11-24 23:15:
+torch's intra-op thread count, so `--threads 1 --render-threads 2` was needed for "one intra-op thread
+for everything but the render groups").
+`--policy NAME` (conf/policy/NAME.yaml) also times that policy on the env's observations each step:
+a no-grad forward at B (collection; `pol ms` column) and a forward + backward on a minibatch of
+`--minibatch` rows (a PPO update's unit; `upd ms`), both excluded from the env's frames/s.
 
 For every (resolution, B) it builds a NavEnv on the demo scene (built and prepared on first use,
 episodes generated if missing), drives it with the expert policy through `step_and_maybe_reset`
@@ -46,7 +52,39 @@ def prepare(preset: str, root: Path, num_episodes: int, max_gaussians: int | Non
     return scene, navmesh, lod_subset(Gaussians.load(scene.gaussians_path), max_gaussians)  # training's LOD subset
 
 
-def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True):
+def load_policy(name: str):
+    """The policy of conf/policy/<name>.yaml, built as training builds it (random weights), with its image
+    encoders frozen when its `freeze_encoder` is "rl" (as the PPO trainer does)."""
+    import yaml
+
+    from policies import make_policy
+
+    kw = yaml.safe_load((Path(__file__).resolve().parents[1] / "conf" / "policy" / f"{name}.yaml").read_text())
+    policy = make_policy(kw.pop("name"), **kw)
+    if policy.config.freeze_encoder == "rl":
+        policy.freeze_encoders(True)
+    return policy
+
+
+def time_policy(policy, td, minibatch: int) -> tuple[float, float]:
+    """(no-grad forward at the env's B, forward + backward on `minibatch` rows): seconds of wall time."""
+    import tensordict
+
+    obs = td.select(*policy.obs_keys)
+    t0 = time.perf_counter()
+    with torch.no_grad():
+        policy(obs.clone())
+    fwd = time.perf_counter() - t0
+    big = tensordict.cat([obs] * -(-minibatch // obs.batch_size[0]))[:minibatch]
+    t0 = time.perf_counter()
+    out = policy(big)
+    (out.get("loc").square().mean() + out.get("state_value").mean()).backward()
+    policy.zero_grad(set_to_none=True)
+    return fwd, time.perf_counter() - t0
+
+
+def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True,
+              render_threads: int | None = None, policy=None, minibatch: int = 200):
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes import load_episodes
@@ -54,24 +92,29 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     cfg = NavEnvConfig()
     cfg.camera.width = cfg.camera.height = res
     cfg.camera.enabled = enabled
+    if render_threads is not None:
+        cfg.camera.render_threads = render_threads
     if hasattr(cfg, "goal_image"):
         cfg.goal_image = "none"  # goal views are not the step's cost (and need files loaded by the caller)
     env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, device=device,
                        gaussians=gaussians.to(device), seed=0)
-    policy = ExpertPolicy(env)
+    expert = ExpertPolicy(env)
     td = env.reset()
-    td = policy(td)
+    td = expert(td)
     _, td = env.step_and_maybe_reset(td)  # warm-up (allocations, first-call costs)
     env.timings.clear()
-    env_time = cpu_time = 0.0
+    env_time = cpu_time = pol_time = upd_time = 0.0
     for _ in range(steps):
-        td = policy(td)
+        td = expert(td)
         t0, c0 = time.perf_counter(), time.process_time()
         _, td = env.step_and_maybe_reset(td)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         env_time += time.perf_counter() - t0
         cpu_time += time.process_time() - c0  # process CPU time: robust to a loaded machine, not to threads
+        if policy is not None:
+            fwd, upd = time_policy(policy, td, minibatch)
+            pol_time, upd_time = pol_time + fwd, upd_time + upd
     tm = env.timings
     render = tm["render"] + tm["reset_render"]
     share = lambda x: 100.0 * x / env_time  # noqa: E731
@@ -80,6 +123,7 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
         "ms/step": 1e3 * env_time / steps,
         "render%": share(render), "motion%": share(tm["physics"]), "rules%": share(tm["rules"]),
         "obs%": share(tm["observation"]), "torchrl%": share(env_time - tm["step"] - tm["reset_render"]),
+        "pol ms": 1e3 * pol_time / steps, "upd ms": 1e3 * upd_time / steps,
     }
 
 
@@ -97,20 +141,32 @@ def main():
     ap.add_argument("--no-off", action="store_true", help="skip the camera-off row")
     ap.add_argument("--compete", type=int, default=0, help="CPU-bound busy-loop processes running alongside")
     ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--render-threads", type=int, default=None, help="camera.render_threads (default: the cores)")
+    ap.add_argument("--policy", default=None, help="also time this policy (conf/policy/NAME.yaml) per step")
+    ap.add_argument("--minibatch", type=int, default=200, help="rows of the policy's timed forward + backward")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.compete)]
     try:
-        print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads, "
+        from wanderland_nav.envs.camera import available_cores
+
+        render_threads = args.render_threads or available_cores()
+        print(f"scene {scene.root} ({len(gaussians)} Gaussians), device {args.device}, {args.threads} threads "
+              f"({render_threads} render threads), "
               f"{args.steps} timed steps after 1 warm-up, {args.compete} competing busy loops, "
               f"load average {os.getloadavg()[0]:.2f}")
         cols = ["B", "res", "fps", "fps_med", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+        policy = None
+        if args.policy:
+            policy = load_policy(args.policy)
+            cols += ["pol ms", "upd ms"]
         print("  ".join(f"{c:>9}" for c in cols), flush=True)
         for B in args.batch:
             for res in args.res + ([] if args.no_off else [None]):
                 runs = [bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device,
-                                  enabled=res is not None) for _ in range(args.repeats)]
+                                  enabled=res is not None, render_threads=args.render_threads, policy=policy,
+                                  minibatch=args.minibatch) for _ in range(args.repeats)]
                 r = max(runs, key=lambda x: x["fps"])
                 r["fps_med"] = statistics.median(x["fps"] for x in runs)
                 print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols),

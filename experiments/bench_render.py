@@ -138,9 +138,11 @@ def _child(cfg: dict) -> dict:
     if hasattr(R, "forward_chunk"):  # a83eb0b on: the forward's chunk kernel (pixels x entries evaluated)
         orig = R.forward_chunk
 
-        def counting(rows, center, valid, T_in, coords, *rest):
-            evals[0] += coords.numel() ** 2 * rows.shape[0] * rows.shape[1]
-            return orig(rows, center, valid, T_in, coords, *rest)
+        def counting(*args):  # (q [6, Ta, L], cols, T_in, coords, ...); before 2026-11-24 22:45 (rows [Ta, L, K], ...)
+            q, coords = args[0], args[3] if args[0].dim() == 3 and args[0].shape[0] == 6 else args[4]
+            evals[0] += coords.numel() ** 2 * q.shape[-2] * q.shape[-1] if q.shape[0] == 6 else \
+                coords.numel() ** 2 * q.shape[0] * q.shape[1]
+            return orig(*args)
 
         R.forward_chunk = counting
     else:  # be6d50d
@@ -202,18 +204,26 @@ def main() -> None:
     ap.add_argument("--max-gaussians", type=int, default=None)
     ap.add_argument("--psnr", type=int, default=None, help="compiled vs eager PSNR at this size on the real splats")
     ap.add_argument("--groups", action="store_true", help="with --env: cost of rendering the cameras in groups")
+    ap.add_argument("--dump-views", default=None, help="with --env: save the env cameras + Gaussians to this .pt")
+    ap.add_argument("--views", default=None, help="render a --dump-views file (any code version: old vs new "
+                                                  "renderer on identical poses) in groups of --sizes cameras")
+    ap.add_argument("--sizes", default="4,8", help="cameras per call for --views")
     ap.add_argument("--_child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a._child:
         print(json.dumps(_child(json.loads(a._child))))
         return
-    if a.env or a.psnr:
+    if a.env or a.psnr or a.views:
         import torch
 
         torch.set_num_threads(a.threads)
         print(f"threads={a.threads}; load avg {os.getloadavg()}")
-        from render_env_profile import env_profile, group_costs, splat_psnr
-        if a.env and a.groups:
+        from render_env_profile import dump_views, env_profile, group_costs, splat_psnr, views_costs
+        if a.views:
+            views_costs(a.views, [int(x) for x in a.sizes.split(",")], a.repeat)
+        elif a.env and a.dump_views:
+            dump_views(a.batch, a.res, a.max_gaussians, a.dump_views)
+        elif a.env and a.groups:
             group_costs(a.batch, a.res, a.max_gaussians, a.repeat)
         elif a.env:
             env_profile(a.batch, a.res, a.max_gaussians, a.repeat, a.compiled)

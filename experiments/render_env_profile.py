@@ -175,3 +175,26 @@ def group_costs(B: int, res: int, max_gaussians: int | None, repeat: int) -> Non
         shown = ", ".join(f"{c:.0f}" for c in costs) if len(costs) <= 8 else f"{len(costs)} groups"
         print(f"  {size:>2} cameras per call: total {sum(costs):7.1f} ms  2-thread makespan {max(busy):7.1f} "
               f"(ideal {sum(costs) / 2:7.1f})  groups: {shown}")
+
+
+def dump_views(B: int, res: int, max_gaussians: int | None, path: str) -> None:
+    """Save the B env-reset cameras and the LOD Gaussians (raw fields) to `path`, so that another code
+    version's renderer can be timed on exactly these poses (`views_costs`)."""
+    g, V, K = env_views(B, res, max_gaussians)
+    torch.save(dict(V=V, K=K, res=res, gaussians={f: getattr(g, f) for f in g.__dataclass_fields__}), path)
+    print(f"saved {B} cameras ({res}x{res}) and {len(g)} Gaussians to {path}")
+
+
+def views_costs(path: str, sizes: list[int], repeat: int) -> None:
+    """Best CPU ms of rendering all cameras of a `dump_views` file, `size` cameras per `render()` call;
+    uses only `render` and `Gaussians`, which every code version has."""
+    from wanderland_nav.render import Gaussians, render
+
+    d = torch.load(path)
+    g, V, K, res = Gaussians(**d["gaussians"]), d["V"], d["K"], d["res"]
+    B = V.shape[0]
+    with torch.no_grad():
+        for size in sizes:
+            total = sum(_best(lambda s=s: render(g, V[s:s + size], K[s:s + size], res, res, render_mode="RGB"),
+                              repeat)[0] for s in range(0, B, size))
+            print(f"  {size:>2} cameras per call: {1e3 * total:7.1f} ms cpu for {B} cameras ({1e3 * total / B:.2f} per camera)")

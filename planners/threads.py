@@ -19,12 +19,19 @@ import torch
 @contextlib.contextmanager
 def single_thread() -> Iterator[None]:
     """Set torch's intra-op threads to 1 for the block, then restore the caller's setting."""
-    n = torch.get_num_threads()
-    if n == 1:
+    with intra_op_threads(1):
+        yield
+
+
+@contextlib.contextmanager
+def intra_op_threads(n: int) -> Iterator[None]:
+    """Set torch's intra-op threads to `n` for the block, then restore the caller's setting."""
+    before = torch.get_num_threads()
+    if n == before:
         yield
         return
-    torch.set_num_threads(1)
+    torch.set_num_threads(n)
     try:
         yield
     finally:
-        torch.set_num_threads(n)
+        torch.set_num_threads(before)

@@ -261,3 +261,37 @@ def test_camera_without_gaussians_is_refused_by_name():
     """NavEnv reads no files: a camera needs its Gaussians handed in."""
     with pytest.raises(ValueError, match=r"NavEnv\(.*\): camera.enabled needs `gaussians`"):
         NavEnv(FakeScene(), make_episodes(), batch_size=[1], config=small_config(), navmesh=FakeNavMesh())
+
+
+def test_env_ops_run_on_one_intra_op_thread_and_render_groups_on_the_cores(monkeypatch):
+    """A camera-on step runs its own small ops on ONE intra-op thread (a pool only adds fork/join waits,
+    milliseconds per op on a loaded machine) while the render groups use the CPU cores, whatever the
+    caller's intra-op count (threads=1 keeps them); the caller's setting is restored afterwards, also
+    when step_and_maybe_reset nests step and reset."""
+    import wanderland_nav.envs.camera as camera_module
+
+    seen = {"workers": [], "env_threads": []}
+    real_map = camera_module.map_single_threaded
+
+    def recording_map(fn, items, workers):
+        seen["workers"].append(workers)
+        return real_map(fn, items, workers)
+
+    monkeypatch.setattr(camera_module, "map_single_threaded", recording_map)
+    monkeypatch.setattr(camera_module, "available_cores", lambda: 3)
+    env = make_env(B=4, config=small_config())
+    real_observation = env._observation
+    env._observation = lambda: (seen["env_threads"].append(torch.get_num_threads()), real_observation())[1]
+    before = torch.get_num_threads()
+    after = []
+    try:
+        for threads in (2, 1):
+            torch.set_num_threads(threads)
+            td = ExpertPolicy(env)(env.reset())
+            env.step_and_maybe_reset(td)
+            after.append(torch.get_num_threads())
+    finally:
+        torch.set_num_threads(before)
+    assert after == [2, 1]
+    assert seen["workers"] and set(seen["workers"]) == {3}  # render groups: the cores
+    assert seen["env_threads"] and set(seen["env_threads"]) == {1}  # the env's own ops: one

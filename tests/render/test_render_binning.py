@@ -40,7 +40,7 @@ def _sigma_on_grid(means2d, conics, x0, y0, dx, dy, steps: int):
 
 def test_tile_test_is_the_exact_minimum_over_the_tile_rectangle():
     means2d, conics, opac, x0, y0, dx, dy = _random_entries(1500)
-    rows = _tile_test_rows(means2d, x0, y0, conics, opac, TS).t().contiguous()
+    rows = _tile_test_rows(means2d, x0, y0, conics, opac, TS)
     kept = _touches_tile(rows, dx, dy, TS)
     limit = torch.log(opac / ALPHA_MIN)
     at_centres = _sigma_on_grid(means2d, conics, x0, y0, dx, dy, TS)
@@ -87,3 +87,15 @@ def test_blocked_projection_and_binning_match_one_block(monkeypatch):
     assert torch.equal(many[1]["gaussian_ids"], one[1]["gaussian_ids"])
     for a, b in zip(many[2], one[2]):
         torch.testing.assert_close(a, b, atol=1e-12, rtol=0)
+
+
+def test_padded_stable_sort_equals_torch_stable_sort_with_ties_and_the_pad_value():
+    from wanderland_nav.render.rasterize import PAD_TO_RADIX, RADIX_MIN, stable_sort
+
+    g = torch.Generator().manual_seed(3)
+    for dtype, n in ((torch.int16, PAD_TO_RADIX), (torch.int32, RADIX_MIN - 1), (torch.int64, 20000)):
+        keys = torch.randint(0, 50, (n,), generator=g).to(dtype)  # many ties: stability matters
+        keys[::97] = torch.iinfo(dtype).max  # real keys equal to the pad value stay before the pads
+        got, want = stable_sort(keys), torch.sort(keys, stable=True)
+        assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1])
+        assert got[1].max() < n  # no pad position leaks into the permutation

@@ -108,3 +108,20 @@ def test_big_endian_and_property_order(tmp_path):
     # x is the last column in this file
     np.testing.assert_array_equal(g.means[:, 0].numpy(), vals[:, 13])
     np.testing.assert_array_equal(g.quats[:, 0].numpy(), vals[:, 3])  # rot_0 is 4th from the end -> col 3
+
+
+def test_covariances_are_cached_for_a_fixed_scene_and_refreshed_after_an_edit():
+    from wanderland_nav.render.projection import quat_scale_to_covar
+
+    g = _random(50, 0)
+    with torch.no_grad():
+        first = g.covariances()
+        assert g.covariances() is first  # a fixed scene: computed once
+        torch.testing.assert_close(first, quat_scale_to_covar(g.quats, g.scales), atol=0, rtol=0)
+        g.log_scales.add_(0.5)  # an in-place edit bumps the tensor's version
+        edited = g.covariances()
+    assert edited is not first
+    torch.testing.assert_close(edited, quat_scale_to_covar(g.quats, g.scales), atol=0, rtol=0)
+    g.requires_grad_(True)
+    tracked = g.covariances()
+    assert tracked.grad_fn is not None and g.covariances() is not tracked  # training: a fresh graph per call

@@ -12,6 +12,7 @@ fisheye (equidistant, `r = f * theta`, gsplat's fisheye model): `f = (W/2) / (hf
 from __future__ import annotations
 
 import math
+import os
 from typing import Callable
 
 import numpy as np
@@ -19,6 +20,7 @@ import torch
 
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
+from planners.threads import intra_op_threads
 from wanderland_nav.render.shards import map_single_threaded
 
 Renderer = Callable[..., object]
@@ -30,6 +32,11 @@ camera_model[, backend]) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,
 def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
     """`K [3, 3]` float32 for the configured resolution, field of view and camera model."""
     return torch.as_tensor(pinhole_intrinsics(cfg.width, cfg.height, cfg.hfov_deg, cfg.camera_model), dtype=torch.float32)
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def group_size(B: int, render_chunk: int) -> int:
@@ -50,6 +57,7 @@ class AgentCamera:
         self.renderer = renderer
         self.gaussians = gaussians
         self.background = torch.tensor(cfg.background, dtype=torch.float32, device=self.device)
+        self.caller_threads: int | None = None  # the env caller's intra-op threads while NavEnv runs its ops on one
 
     def cam_from_world(self, position_nav: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
         """position_nav `[B, 3]` (feet), yaw `[B]` -> `cam_from_world [B, 4, 4]` in the scene frame."""
@@ -63,8 +71,11 @@ class AgentCamera:
         return invert_rigid(world_from_cam)
 
     def workers(self) -> int:
-        """Threads that render groups concurrently: `render_threads`, else torch's intra-op thread count."""
-        return self.cfg.render_threads if self.cfg.render_threads is not None else torch.get_num_threads()
+        """Threads that render groups concurrently: `render_threads`, else the CPU cores this process may
+        use. Not torch's intra-op count: each group runs on one intra-op thread with no barrier, so the
+        groups use the cores even when `threads=1` keeps the small policy / env ops off the OpenMP pool
+        (which collapses under load: experiments/env/README.md, fourth pass)."""
+        return self.cfg.render_threads if self.cfg.render_threads is not None else available_cores()
 
     @torch.no_grad()
     def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
@@ -89,9 +100,10 @@ class AgentCamera:
         render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
         if self.device.type == "cpu" and self.cfg.render_backend == "torch":
             map_single_threaded(render_group, groups, self.workers())
-        else:  # GPU and compiled kernels schedule their own threads
-            for g in groups:
-                render_group(g)
+        else:  # GPU and compiled kernels schedule their own threads (on CPU: the env caller's intra-op threads)
+            with intra_op_threads(self.caller_threads or torch.get_num_threads()):
+                for g in groups:
+                    render_group(g)
         return rgb, depth
 
     def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int):

@@ -34,7 +34,7 @@ class CameraConfig:
     history: int = 5  # T frames in keys.RGB (CityWalker: 5 context frames)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] where nothing is hit
     render_chunk: int = 16  # cameras per render() call: bounds peak memory; the groups are rendered concurrently
-    render_threads: int | None = None  # threads rendering groups (1 intra-op thread each); None: torch.get_num_threads()
+    render_threads: int | None = None  # threads rendering groups (1 intra-op thread each); None: the CPU cores
     render_backend: str = "torch"  # "torch" | "compiled" (torch.compile'd hot stages) | "gsplat" (CUDA, extra)
 
 

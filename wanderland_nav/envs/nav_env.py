@@ -52,18 +52,25 @@ from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 log = logging.getLogger(__name__)
 
 
-def _one_thread_when_blind(method):
-    """Run a blind (camera-off) env call on one intra-op thread: all its work, TorchRL's included, is
-    small `[B]` tensor ops, which a thread pool only slows down, and on a loaded machine by
-    milliseconds per op (`planners/threads.py`). With the camera on, the renderer keeps the
-    caller's threads (the planners' queries still run on one: they switch themselves)."""
+def _one_intra_op_thread(method):
+    """Run an env call, TorchRL's bookkeeping included, on one intra-op thread: apart from rendering, all
+    its work is small `[B]` / `[B, T, H, W, 3]` tensor ops, which a thread pool only slows down, and on
+    a loaded machine by milliseconds per op (`planners/threads.py`). The camera's render groups run on
+    their own threads (`AgentCamera.workers`: one intra-op thread each; a compiled or GPU backend gets the
+    caller's intra-op count back, `AgentCamera.caller_threads`). Measured in
+    `experiments/env/README.md` (2026-11-24, fourth pass). Nested entry points (`step_and_maybe_reset`
+    calls `step`) keep the outermost caller's count."""
 
     @functools.wraps(method)
     def run(self, *args, **kwargs):
-        if self.config.camera.enabled:
+        if torch.get_num_threads() == 1 and self.camera.caller_threads is not None:  # nested, or a 1-thread caller
             return method(self, *args, **kwargs)
-        with single_thread():
-            return method(self, *args, **kwargs)
+        self.camera.caller_threads = torch.get_num_threads()
+        try:
+            with single_thread():
+                return method(self, *args, **kwargs)
+        finally:
+            self.camera.caller_threads = None
 
     return run
 
@@ -87,9 +94,9 @@ class NavEnv(EnvBase):
 
     batch_locked = True
     # TorchRL's entry points, its own bookkeeping included (tensordict copies, `where` on resets)
-    step = _one_thread_when_blind(EnvBase.step)
-    reset = _one_thread_when_blind(EnvBase.reset)
-    step_and_maybe_reset = _one_thread_when_blind(EnvBase.step_and_maybe_reset)
+    step = _one_intra_op_thread(EnvBase.step)
+    reset = _one_intra_op_thread(EnvBase.reset)
+    step_and_maybe_reset = _one_intra_op_thread(EnvBase.step_and_maybe_reset)
 
     def __init__(
         self,

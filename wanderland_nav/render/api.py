@@ -318,11 +318,12 @@ def render(
     raster = rasterization
     if backend == "gsplat":
         from .gsplat_backend import gsplat_rasterization as raster
+    covars = None if backend == "gsplat" else g.covariances()  # cached for a fixed scene (`Gaussians.covariances`)
     colors, alphas, _ = raster(
         g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
         near_plane=near_plane, far_plane=far_plane, sh_degree=deg, backgrounds=bgs, render_mode=render_mode,
         rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
-        compiled=backend == "compiled")
+        compiled=backend == "compiled", covars=covars)
     rgb = depth = None
     if render_mode.startswith("RGB"):
         rgb = colors[..., :3].clamp(0.0, 1.0)

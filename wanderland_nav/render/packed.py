@@ -18,7 +18,7 @@ import dataclasses
 
 import torch
 
-from .projection import ALPHA_THRESHOLD, Projected, camera_jacobian, screen_space
+from .projection import ALPHA_THRESHOLD, Projected, camera_jacobian, pinhole_terms, screen_space
 
 PAIR_BLOCK = 1 << 15  # candidate pairs per block of the EWA stage (its [block] temporaries fit in L2)
 RADIUS_SIGMAS = 3.33  # the reference's largest extent (in standard deviations) of a splat's bounding box
@@ -68,14 +68,20 @@ def _sym6(covars: torch.Tensor) -> torch.Tensor:
     return torch.stack([f[..., 0], off[..., 0], off[..., 1], f[..., 4], off[..., 2], f[..., 8]], -1)
 
 
-def _ewa_cov2d(J: torch.Tensor, R: torch.Tensor, cov6: torch.Tensor):
-    """Entries (c00, c01, c11) `[M]` of T cov T^T with T = J R, for J `[M, 2, 3]`, R `[9, M]` (row-major
-    3x3 per column), cov6 `[6, M]` (`_sym6`). Written out as contiguous `[M]` vector ops: on CPU they
-    are several times faster than batched 2x3 / 3x3 bmm chains (per-matrix overhead) at this size."""
-    j = J.reshape(-1, 6).t().contiguous().unbind(0)
+def _ewa_cov2d(j: tuple, R: torch.Tensor, cov6: torch.Tensor):
+    """Entries (c00, c01, c11) `[M]` of T cov T^T with T = J R, for J's six entries j (row-major, each
+    `[M]` or None where J is 0, as the pinhole's J01 and J10), R `[9, M]` (row-major 3x3 per column),
+    cov6 `[6, M]` (`_sym6`). Written out as contiguous `[M]` vector ops: on CPU they are several times
+    faster than batched 2x3 / 3x3 bmm chains (per-matrix overhead) at this size. Skipping a zero entry
+    gives the same floats (a + 0 * r = a for finite r)."""
     r = R.unbind(0)
-    t0 = [j[0] * r[k] + j[1] * r[3 + k] + j[2] * r[6 + k] for k in range(3)]  # first row of J R
-    t1 = [j[3] * r[k] + j[4] * r[3 + k] + j[5] * r[6 + k] for k in range(3)]
+
+    def row(j0, j1, j2, k):  # (J R)[i, k] = j0 R[0, k] + j1 R[1, k] + j2 R[2, k]
+        terms = [jj * r[3 * i + k] for i, jj in enumerate((j0, j1, j2)) if jj is not None]
+        return terms[0] + terms[1] + terms[2] if len(terms) == 3 else terms[0] + terms[1] if len(terms) == 2 else terms[0]
+
+    t0 = [row(*j[:3], k) for k in range(3)]  # first row of J R
+    t1 = [row(*j[3:], k) for k in range(3)]
     xx, xy, xz, yy, yz, zz = cov6.unbind(0)
     s0 = (xx * t0[0] + xy * t0[1] + xz * t0[2], xy * t0[0] + yy * t0[1] + yz * t0[2],
           xz * t0[0] + yz * t0[1] + zz * t0[2])  # cov t0
@@ -137,12 +143,18 @@ def _project_pairs(tables, cam: torch.Tensor, gid: torch.Tensor, N: int, *, widt
     # Per-pair quantities as contiguous rows [k, M] (one gather each), viewed as [M, k] where needed.
     flat = (cam * (3 * N) + n)[None, :] + (torch.arange(3, device=cam.device) * N)[:, None]  # [3, M] into mc_all
     mc = mc_flat.index_select(0, flat.reshape(-1)).view(3, M).t()  # [M, 3] camera frame
-    means2d, J = camera_jacobian(mc, Ks9.index_select(1, cam).t().view(M, 3, 3), width, height, camera_model)
-    c00, c01, c11 = _ewa_cov2d(J, R9.index_select(1, cam), cov6.index_select(1, gid))
+    Ks = Ks9.index_select(1, cam).t().view(M, 3, 3)
+    if camera_model == "pinhole":  # J's four non-zero entries, no [M, 2, 3] stack and transposed copy
+        u, v, j00, j02, j11, j12 = pinhole_terms(mc, Ks, width, height)
+        means2d, j = torch.stack([u, v], dim=-1), (j00, None, j02, None, j11, j12)
+    else:
+        means2d, J = camera_jacobian(mc, Ks, width, height, camera_model)
+        j = J.reshape(-1, 6).t().contiguous().unbind(0)
+    c00, c01, c11 = _ewa_cov2d(j, R9.index_select(1, cam), cov6.index_select(1, gid))
     proj = screen_space(means2d, (c00, c01, c11), mc[:, 2], opacities.index_select(0, gid), width, height,
                         eps2d=eps2d, near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                         calc_compensations=calc_compensations)
-    sel = (proj.radii > 0).all(-1).nonzero().squeeze(1)
+    sel = ((proj.radii[:, 0] > 0) & (proj.radii[:, 1] > 0)).nonzero().squeeze(1)
     pick = lambda x: None if x is None else x.index_select(0, sel)  # noqa: E731
     proj = Projected(*(pick(getattr(proj, f.name)) for f in dataclasses.fields(Projected)))
     return cam.index_select(0, sel), gid.index_select(0, sel), proj

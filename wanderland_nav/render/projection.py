@@ -53,6 +53,15 @@ def _intrinsics(Ks: torch.Tensor):
 
 def _pinhole_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int):
     """means2d `[...,2]` and J `[...,2,3]`; x/z and y/z are clamped to 1.3x the frustum for J only."""
+    u, v, j00, j02, j11, j12 = pinhole_terms(mc, Ks, width, height)
+    zero = torch.zeros_like(j00)
+    J = torch.stack([j00, zero, j02, zero, j11, j12], dim=-1)
+    return torch.stack([u, v], dim=-1), J.reshape(mc.shape[:-1] + (2, 3))
+
+
+def pinhole_terms(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: int):
+    """(u, v, J00, J02, J11, J12), each `[...]`: the projected centre and the four non-zero entries of
+    the pinhole Jacobian (J01 = J10 = 0), unstacked so the packed path skips the [..., 2, 3] copies."""
     x, y, z = mc.unbind(-1)
     z = torch.where(z.abs() > 1e-6, z, torch.full_like(z, 1e-6))  # culled pairs: no NaN leaks into gradients
     fx, fy, cx, cy = _intrinsics(Ks)
@@ -62,10 +71,7 @@ def _pinhole_jacobian(mc: torch.Tensor, Ks: torch.Tensor, width: int, height: in
     rz = 1.0 / z
     tx = z * torch.minimum(torch.maximum(x * rz, -lim_x_neg), lim_x_pos)
     ty = z * torch.minimum(torch.maximum(y * rz, -lim_y_neg), lim_y_pos)
-    zero = torch.zeros_like(z)
-    J = torch.stack([fx * rz, zero, -fx * tx * rz * rz, zero, fy * rz, -fy * ty * rz * rz], dim=-1)
-    means2d = torch.stack([fx * x * rz + cx, fy * y * rz + cy], dim=-1)
-    return means2d, J.reshape(mc.shape[:-1] + (2, 3))
+    return fx * x * rz + cx, fy * y * rz + cy, fx * rz, -fx * tx * rz * rz, fy * rz, -fy * ty * rz * rz
 
 
 def _fisheye_jacobian(mc: torch.Tensor, Ks: torch.Tensor):
@@ -139,7 +145,7 @@ def screen_space(means2d, cov2d_entries, z, opacities, width: int, height: int, 
         valid &= ~((rx <= radius_clip) & (ry <= radius_clip))
         m2 = means2d.detach()
         valid &= (m2[..., 0] + rx > 0) & (m2[..., 0] - rx < width) & (m2[..., 1] + ry > 0) & (m2[..., 1] - ry < height)
-        valid &= torch.isfinite(m2).all(-1)
+        valid &= torch.isfinite(m2[..., 0]) & torch.isfinite(m2[..., 1])
         radii = torch.stack([rx, ry], dim=-1).where(valid[..., None], torch.zeros_like(m2)).to(torch.int32)
     return Projected(means2d, conics, z, radii, compensations, op_used)
 
