@@ -77,7 +77,7 @@ def _fmt(e: Estimate) -> str:
 
 def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) -> tuple[list[str], dict | None]:
     """Lines for one degraded env: per policy SR / IR in grounded vs here (paired), then tau."""
-    lines, ref, other, labels = [], [], [], []
+    lines, ref, other, labels, kept = [], [], [], [], []
     for pol in policies:
         m = matched_runs(records, env, pol, seeds)
         if m is None:
@@ -91,6 +91,7 @@ def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) 
         ref.append(scores_of(g, metric))
         other.append(scores_of(e, metric))
         labels.append(lab)
+        kept.append(pol)
     if len(labels) < 2:
         return lines, None
     a = paired_rank_agreement(torch.stack(ref), torch.stack(other), resamples=resamples)
@@ -101,7 +102,16 @@ def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) 
     if len(seeds) > 1:
         lines.append("   per seed (bootstrap over routes): "
                      + "; ".join(f"seed {sd} {_tau_text(t, resamples)}" for sd, t in zip(seeds, a["per_seed"])))
+    for i in (i for i, pol in enumerate(kept) if pol[0] == env):  # the policy trained in this world: does this world promote it (the paper's misranking)?
+        g, e = (rank_of(torch.stack(x).mean(-1), i) for x in (ref, other))  # [S] ranks, 1 = best
+        lines.append(f"   {labels[i]} (trained here), rank of {len(labels)} by {metric}, per seed: in grounded "
+                     f"{g.tolist()} -> in {env} {e.tolist()}")
     return lines, a
+
+
+def rank_of(scores: torch.Tensor, i: int) -> torch.Tensor:
+    """Competition rank (1 = best; ties share the better rank) of item `i` in `scores` `[P, S]` -> `[S]`."""
+    return 1 + (scores > scores[i]).sum(0)
 
 
 def _tau_text(a: dict, resamples: int) -> str:
