@@ -39,7 +39,7 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     if c.backfill_bc_rounds:  # per-round BC checkpoints for cells made before recipe.py kept them; runs no cell
         from wanderland_nav.compose.study_backfill import backfill_bc_rounds
 
-        backfill_bc_rounds(execute, Manifest(out / MANIFEST), list(c.backfill_bc_rounds), out)
+        backfill_bc_rounds(execute, Manifest(out / MANIFEST), list(c.backfill_bc_rounds), out, c.backfill_max_weight_gap)
         return {}
     # report_only: the tables of what other study processes have finished so far, running no cell
     manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
