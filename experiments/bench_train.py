@@ -54,7 +54,7 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
     policy = make_policy(name, **DEMO[name])
     trainer = PPOTrainer.__new__(PPOTrainer)  # only the loss + optimiser, no env
     PPOTrainer.__init__(trainer, policy, lambda: None, PPOConfig(total_frames=frames, frames_per_batch=frames,
-                        minibatch_size=minibatch, epochs=1, target_kl=None), logger=None, progress=False)
+                        minibatch_size=minibatch, epochs=1, target_kl=None, action_dist="waypoints"), logger=None, progress=False)
     actor = make_actor(policy)
     obs = synthetic(actor_batch, policy, policy.num_waypoints)
     with torch.no_grad():
@@ -116,7 +116,7 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
                          navmesh=load_navmesh(scene), gaussians=g)
     tr = PPOTrainer(policy, env_fn,
                     PPOConfig(total_frames=fpb * iterations, frames_per_batch=fpb, minibatch_size=fpb // 4),
-                    logger=lg, progress=False)
+                    logger=lg, progress=False, kinematics=cfg.kinematics)
     tr.train()
     last = lg.rows[-1]
     return {"policy": name, "env_batch": batch, "collect_fps": last["time/collect_fps"], "loop_fps": last["time/fps"]}

@@ -12,7 +12,9 @@ Why a Gaussian over waypoints: PPO needs log-probabilities of the executed actio
 predicts a deterministic set of K body-frame waypoints; the action distribution is an independent
 Normal around them with a learned, state-independent log-std per (waypoint, axis). The log-prob is
 summed over the K*2 action dimensions (`WaypointNormal`). For NoMaD's diffusion head the mean is the
-deterministic (DDIM, eta=0, x_T=0) denoised chain, see `policies/nomad/model.py`.
+deterministic (DDIM, eta=0, x_T=0) denoised chain, see `policies/nomad/model.py`. PPO's default
+(`algo.ppo.action_dist=tracked`, `wanderland_nav/rl/tracked_target.py`) does not use this K*2 Gaussian:
+the env executes one waypoint per step, so PPO samples and scores only that one (2 dims).
 
 Why the value head reads *detached* features: the paper fine-tunes released (or, here, behaviour-cloned)
 policies with PPO; a freshly initialised critic back-propagating into the shared trunk would wreck the

@@ -23,7 +23,7 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import comparison_table, row_estimates
+from wanderland_nav.rl.report import comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 
@@ -54,7 +54,8 @@ def run(cfg: DictConfig) -> dict:
     recipe, scene = training_recipe(c, config, evaluate)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
-    table = comparison_table({r: results[r]["records"] for r in rows}, baseline=rows[0])
+    table = comparison_table({r: results[r]["records"] for r in rows}, baseline=rows[0],
+                             pairs=successive_pairs(rows))  # the RL gain "BC+RL - BC" beside "- untrained"
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
     where = f"set {c.scene.name}" if c.scene.set else scene.name
     header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "

@@ -8,6 +8,7 @@ from fake_env import FakeNavEnv
 
 from policies import make_policy
 from wanderland_nav import keys as K
+from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.rl.checkpoint import Checkpointer
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer, make_actor
 
@@ -37,7 +38,7 @@ def tiny_policy():
 def trainer(policy, tmp_path, total, logger=None, **kw):
     cfg = PPOConfig(total_frames=total, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4, **kw)
     return PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=logger or ListLogger(),
-                      checkpointer=Checkpointer(tmp_path / "ckpt"), progress=False)
+                      checkpointer=Checkpointer(tmp_path / "ckpt"), progress=False, kinematics=KinematicsConfig())
 
 
 def test_actor_writes_action_and_log_prob():
@@ -95,7 +96,7 @@ def test_ppo_learns_fake_point_goal(tmp_path):
     p = tiny_policy()
     log = ListLogger()
     cfg = PPOConfig(total_frames=4800, frames_per_batch=240, minibatch_size=60, epochs=4, lr=3e-4)
-    PPOTrainer(p, lambda: FakeNavEnv((8,)), cfg, logger=log, progress=False).train()
+    PPOTrainer(p, lambda: FakeNavEnv((8,)), cfg, logger=log, progress=False, kinematics=KinematicsConfig()).train()
     early = sum(r["train/reward_mean"] for _, r in log.rows[:3]) / 3
     late = sum(r["train/reward_mean"] for _, r in log.rows[-3:]) / 3
     assert late > early
@@ -127,7 +128,8 @@ def test_ppo_learns_fast_critic_and_policy(tmp_path):
     log = ListLogger()
     cfg = PPOConfig(total_frames=768, frames_per_batch=128, minibatch_size=32, epochs=4, lr=1e-3, critic_lr=1e-2,
                     target_kl=None, critic_epochs=4, anneal_lr=False)
-    PPOTrainer(p, lambda: FakeNavEnv((16,), seed=2), cfg, logger=log, progress=False, seed=2).train()
+    PPOTrainer(p, lambda: FakeNavEnv((16,), seed=2), cfg, logger=log, progress=False, seed=2,
+               kinematics=KinematicsConfig()).train()
     ev = [r["losses/explained_variance"] for _, r in log.rows]
     assert len(ev) == 6 and ev[0] < 0.1, ev                      # a fresh critic explains nothing
     assert sum(ev[-4:]) / 4 > 0.1, ev                            # the critic trained
@@ -144,7 +146,8 @@ def test_multi_sync_collector_two_workers(tmp_path):
     """collector=multi: two worker processes, one env each, batches gathered synchronously."""
     log = ListLogger()
     cfg = PPOConfig(total_frames=64, frames_per_batch=32, minibatch_size=16, epochs=1)
-    t = PPOTrainer(tiny_policy(), _fake_env_fn, cfg, logger=log, num_workers=2, progress=False)
+    t = PPOTrainer(tiny_policy(), _fake_env_fn, cfg, logger=log, num_workers=2, progress=False,
+                   kinematics=KinematicsConfig())
     t.train()
     assert [s for s, _ in log.rows] == [32, 64]
 
@@ -175,11 +178,21 @@ def test_critic_warmup_leaves_the_policy_alone_then_updates_it(tmp_path):
     assert any(not torch.equal(before[k], v) for k, v in after.items())        # iteration 2: the actor moved
 
 
-@pytest.mark.parametrize("total,warmup", [(32, 1), (64, 2), (95, 2)])
+@pytest.mark.parametrize("total,warmup", [(32, 1), (64, 2), (63, 2)])
 def test_budget_without_a_policy_update_is_refused(total, warmup):
-    with pytest.raises(ValueError, match=rf"total_frames={total} // frames_per_batch=32 = {total // 32} "
+    with pytest.raises(ValueError, match=rf"total_frames={total} / frames_per_batch=32 rounded up = {-(-total // 32)} "
                                          rf"iteration\(s\) <= critic_warmup_iters={warmup}.*never updated"):
         PPOConfig(total_frames=total, frames_per_batch=32, minibatch_size=16, critic_warmup_iters=warmup)
+
+
+def test_num_iterations_is_what_the_collector_runs(tmp_path):
+    """TorchRL rounds total_frames UP to a multiple of frames_per_batch: 65 frames run 3 iterations of 32, one
+    past the 2 warm-up iterations, so the budget is accepted and the policy is updated once."""
+    log = ListLogger()
+    t = trainer(tiny_policy(), tmp_path, 65, log, critic_warmup_iters=2)
+    assert t.cfg.num_iterations == 3
+    t.train()
+    assert len(log.rows) == t.cfg.num_iterations and [r["losses/critic_warmup"] for _, r in log.rows] == [1, 1, 0]
 
 
 def test_train_config_refusal_names_the_keys_and_a_disabled_stage_is_not_checked():
@@ -187,7 +200,7 @@ def test_train_config_refusal_names_the_keys_and_a_disabled_stage_is_not_checked
     from wanderland_nav.compose.cli import compose_config
     from wanderland_nav.compose.schema import TrainConfig
 
-    with pytest.raises(ValueError, match=r"algo\.ppo\.total_frames=1600 // frames_per_batch=800 = 2 iteration"
+    with pytest.raises(ValueError, match=r"algo\.ppo\.total_frames=1600 / frames_per_batch=800 rounded up = 2 iteration"
                                          r"\(s\) <= critic_warmup_iters=2"):
         typed_config(compose_config("train", ["+exp=citywalker_rl", "algo.ppo.total_frames=1600"]), TrainConfig)
     bc_only = typed_config(compose_config("train", ["+exp=citywalker_bc", "algo.ppo.total_frames=400"]), TrainConfig)
@@ -215,7 +228,8 @@ def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint
     p = tiny_policy()
     cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4)
     ck = Checkpointer(tmp_path / "ckpt")
-    t = PPOTrainer(p, lambda: NaNRewardEnv((4,)), cfg, logger=ListLogger(), checkpointer=ck, progress=False)
+    t = PPOTrainer(p, lambda: NaNRewardEnv((4,)), cfg, logger=ListLogger(), checkpointer=ck, progress=False,
+                   kinematics=KinematicsConfig())
     with pytest.raises(NonFiniteLossError, match=r"PPO diverged at iteration 2 \(epoch 0, minibatch 0\): "
                                                  r"non-finite advantage=nan, value_target=nan.*last\.pt "
                                                  r"\(iteration 1\) is intact"):
@@ -227,15 +241,17 @@ def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint
         torch.testing.assert_close(v, good["policy"][k])
 
 
-def test_init_std_sets_exploration_and_std_lr_moves_only_the_std_faster(tmp_path):
-    p = tiny_policy()
-    t = trainer(p, tmp_path / "a", 64, init_std=0.1, std_lr=0.05)
-    torch.testing.assert_close(p.scale(), torch.full_like(p.scale(), 0.1))
+@pytest.mark.parametrize("dist,shape", [("tracked", (2,)), ("waypoints", (5, 2))])
+def test_init_std_sets_exploration_and_std_lr_moves_only_the_std_faster(tmp_path, dist, shape):
+    t = trainer(tiny_policy(), tmp_path / "a", 64, init_std=0.1, std_lr=0.05, action_dist=dist)
+    std = t.std_owner.scale  # tracked: the target's own [2]; waypoints: the policy's [K, 2]
+    assert std().shape == shape
+    torch.testing.assert_close(std(), torch.full(shape, 0.1))
     assert [g["lr"] for g in t.optim.param_groups] == [3e-4, 0.05]
     t.train()
-    moved = (p.scale() - 0.1).abs().max()
-    q = tiny_policy()
-    trainer(q, tmp_path / "b", 64, init_std=0.1).train()                 # std at the actor's lr
-    assert moved > 10 * (q.scale() - 0.1).abs().max() > 0
-    with pytest.raises(ValueError, match="std=0.01 must exceed min_std=0.02"):
-        trainer(tiny_policy(), tmp_path / "c", 64, init_std=0.01)
+    moved = (std() - 0.1).abs().max()
+    q = trainer(tiny_policy(), tmp_path / "b", 64, init_std=0.1, action_dist=dist)   # std at the actor's lr
+    q.train()
+    assert moved > 10 * (q.std_owner.scale() - 0.1).abs().max() > 0
+    with pytest.raises(ValueError, match=r"std=0.01 must exceed (the policy's )?min_std=0.02"):
+        trainer(tiny_policy(), tmp_path / "c", 64, init_std=0.01, action_dist=dist)

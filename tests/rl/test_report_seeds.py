@@ -38,3 +38,19 @@ def test_seed_table_from_results_files(tmp_path, capsys):
     assert "over 30 episodes x 3 seeds" in table
     with pytest.raises(ValueError, match="cannot read"):
         load_seed_runs([tmp_path / "missing.json"])
+
+
+def test_main_job_table_shows_each_phases_paired_gain():
+    """untrained -> BC -> BC+RL: beside the '- untrained' rows, 'BC+RL - BC' (the RL gain) with its interval."""
+    from wanderland_nav.rl.report import comparison_table, successive_pairs
+
+    rows = {"untrained": _records([0] * 40), "BC": _records([i % 2 for i in range(40)]),
+            "BC+RL": _records([int(i % 4 != 0) for i in range(40)])}
+    assert successive_pairs(list(rows)) == [("BC", "untrained"), ("BC+RL", "BC")]
+    lines = comparison_table(rows, baseline="untrained", pairs=successive_pairs(list(rows))).splitlines()
+    names = [x.split("  ")[0] for x in lines if "  paired  " in x]
+    assert names == ["BC - untrained", "BC+RL - untrained", "BC+RL - BC"]           # no duplicate BC - untrained
+    sr = re.split(r"\s{2,}", next(x for x in lines if x.startswith("BC+RL - BC")).split("paired")[1].strip())[1]
+    assert sr.startswith("+0.250 [")                                                # 0.75 - 0.50 over the same 40
+    with pytest.raises(KeyError, match=r"pairs \[\('RL', 'BC'\)\] name rows not among"):
+        comparison_table(rows, baseline="untrained", pairs=[("RL", "BC")])

@@ -43,6 +43,7 @@ def test_two_ray_workers_run_ppo_iterations(tmp_path):
     from test_ppo import ListLogger, tiny_policy
 
     from wanderland_nav.rl.checkpoint import Checkpointer
+    from wanderland_nav.envs.config import KinematicsConfig
     from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
 
     path = os.pathsep.join([str(TESTS / "rl"), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])
@@ -54,7 +55,8 @@ def test_two_ray_workers_run_ppo_iterations(tmp_path):
         before = [p.detach().clone() for p in policy.parameters()]
         cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1)
         t = PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=log, checkpointer=Checkpointer(tmp_path),
-                       num_workers=2, progress=False, ray={"address": None, "cpus_per_worker": 1})
+                       num_workers=2, progress=False, ray={"address": None, "cpus_per_worker": 1},
+                       kinematics=KinematicsConfig())
         t.train()
     finally:
         ray.shutdown()

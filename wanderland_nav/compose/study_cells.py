@@ -166,7 +166,7 @@ class StudyCells:
                                "too few to train and evaluate")
         ppo = t.algo.ppo
         # recorded beside the rows (a budget with no policy update is refused by PPOConfig before we get here)
-        updates = max(0, -(-ppo.total_frames // ppo.frames_per_batch) - ppo.critic_warmup_iters) if ppo.enabled else 0
+        updates = ppo.num_iterations - ppo.critic_warmup_iters if ppo.enabled else 0
         rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
         return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
                 "ppo_policy_updates": updates,

@@ -127,5 +127,5 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
                     evaluate=lambda name, pol, env, step: evaluate(name, pol, env, step, logger, episodes_path),
                     logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
                     num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first)
+                    first_row=first, kinematics=env_cfg.kinematics)
     return recipe, scene

@@ -7,8 +7,10 @@ The loop (`PPOTrainer.train`) reads top to bottom like a CleanRL/TorchRL recipe:
         for epoch: for minibatch: ClipPPOLoss -> clip grads -> Adam step
         log train/ losses/ time/ ; checkpoint atomically ; update collector weights
 
-The actor is the policy wrapped in a `ProbabilisticActor` with `WaypointNormal` (independent Normal over
-the `[K, 2]` waypoints; see `policies.base`). The critic is its own network (`rl/critic.py`: the policy's
+The actor is the policy wrapped in a `ProbabilisticActor`. Its distribution (`action_dist`) is, by default,
+a 2-D Normal over the ONE waypoint the env's controller tracks (`rl/tracked_target.py`: the other K-1
+waypoints never move the agent, and as action dimensions they are pure noise to PPO); `waypoints` keeps the
+older `WaypointNormal` over all `[K, 2]` coordinates (`policies.base`). The critic is its own network (`rl/critic.py`: the policy's
 detached readout features + final-goal features + the episode clock, PopArt-normalised targets), fitted
 for `critic_epochs` passes per batch on inputs computed once; the policy's `value_head` is not used here.
 The actor's learning rate anneals linearly to 0 over `total_frames` (`anneal_lr`, as CleanRL's PPO).
@@ -32,10 +34,12 @@ from tqdm.auto import tqdm
 
 from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
+from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.critic import NavCritic, explained_variance, fit_critic
 from wanderland_nav.rl.loggers import Logger
+from wanderland_nav.rl.tracked_target import TARGET_LOC, TARGET_SCALE, TrackedTargetActor, TrackedTargetNormal
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +67,14 @@ class PPOConfig:
     init_std: float | None = None      # exploration std (m) PPO starts from; None: the policy's own (BC keeps
                                        #   the policy config's init_std: BC does not train it)
     std_lr: float | None = None        # the exploration std's own Adam lr; None: the actor's `lr`
+    action_dist: str = "tracked"       # "tracked": Normal over the executed (tracked) waypoint, 2 dims
+                                       #   (rl/tracked_target.py); "waypoints": Normal over all K*2 coordinates
+
+    @property
+    def num_iterations(self) -> int:
+        """Collector iterations that actually run: TorchRL rounds total_frames UP to a multiple of
+        frames_per_batch. `num_iterations - critic_warmup_iters` of them update the policy."""
+        return -(-self.total_frames // self.frames_per_batch)
 
     def __post_init__(self):
         if self.frames_per_batch <= 0 or self.total_frames < self.frames_per_batch:
@@ -70,17 +82,35 @@ class PPOConfig:
                              f"({self.total_frames})")
         if not 0 < self.minibatch_size <= self.frames_per_batch:
             raise ValueError(f"PPO: minibatch_size={self.minibatch_size} must be in (0, frames_per_batch]")
-        iterations = self.total_frames // self.frames_per_batch
+        if self.action_dist not in ("tracked", "waypoints"):
+            raise ValueError(f"PPO: action_dist='{self.action_dist}' must be 'tracked' or 'waypoints'")
+        iterations = self.num_iterations
         if iterations <= self.critic_warmup_iters:  # the "RL" row would silently be the initial policy
             raise ValueError(
-                f"PPO: total_frames={self.total_frames} // frames_per_batch={self.frames_per_batch} = {iterations} "
-                f"iteration(s) <= critic_warmup_iters={self.critic_warmup_iters}: every iteration only trains the "
+                f"PPO: total_frames={self.total_frames} / frames_per_batch={self.frames_per_batch} rounded up = "
+                f"{iterations} iteration(s) <= critic_warmup_iters={self.critic_warmup_iters}: every iteration only trains the "
                 f"critic and the policy is never updated. Raise total_frames above frames_per_batch * "
                 f"critic_warmup_iters = {self.frames_per_batch * self.critic_warmup_iters} or lower critic_warmup_iters")
 
 
-def make_actor(policy: NavPolicy) -> ProbabilisticActor:
-    """Policy -> stochastic actor writing `ACTION` and `ACTION_LOG_PROB` (used by the collector and loss)."""
+def make_actor(policy: NavPolicy, kinematics: KinematicsConfig | None = None,
+               init_std: float | None = None) -> ProbabilisticActor:
+    """Policy -> stochastic actor writing `ACTION` and `ACTION_LOG_PROB` (used by the collector and loss).
+
+    With `kinematics` (the env's): the tracked-target distribution (`rl/tracked_target.py`), its std from
+    `init_std` (None: the policy's); without: `WaypointNormal` over all K waypoints (std: the policy's)."""
+    if kinematics is not None:
+        return ProbabilisticActor(
+            module=TrackedTargetActor(policy, kinematics, init_std),
+            in_keys={"loc": TARGET_LOC, "scale": TARGET_SCALE},
+            out_keys=[K.ACTION],
+            distribution_class=TrackedTargetNormal,
+            distribution_kwargs={"num_waypoints": policy.num_waypoints},
+            return_log_prob=True,
+            log_prob_key=K.ACTION_LOG_PROB,
+        )
+    if init_std is not None:
+        policy.set_std(init_std)
     return ProbabilisticActor(
         module=policy,
         in_keys={"loc": K.LOC, "scale": K.SCALE},
@@ -149,14 +179,22 @@ class PPOTrainer:
 
     def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase] | EnvBase, cfg: PPOConfig, *,
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
-                 seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None):
+                 seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None,
+                 kinematics: KinematicsConfig | None = None):
+        """`kinematics`: the env's (`env.kinematics`), required by `action_dist=tracked`: the tracked waypoint
+        must be chosen by the env's own rule and thresholds."""
+        if cfg.action_dist == "tracked" and kinematics is None:
+            raise ValueError("PPO: algo.ppo.action_dist=tracked needs the env's kinematics config "
+                             "(PPOTrainer(kinematics=env_cfg.kinematics)) or algo.ppo.action_dist=waypoints")
         self.policy, self.env_fn, self.cfg = policy, env_fn, cfg
         self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
         if policy.config.freeze_encoder != "never":  # "rl" (the paper: update only the policy) or "always"
             policy.freeze_encoders(True)
-        self.actor = make_actor(policy)
+        self.actor = make_actor(policy, kinematics if cfg.action_dist == "tracked" else None, cfg.init_std)
+        # the exploration std PPO trains: the tracked target's own [2], or the policy's [K, 2]
+        self.std_owner = self.actor.module[0] if cfg.action_dist == "tracked" else policy
         self.critic = NavCritic(policy, hidden=cfg.critic_hidden, horizon=cfg.critic_horizon)
         self.loss = ClipPPOLoss(self.actor, None, clip_epsilon=cfg.clip_epsilon,  # actor only: see rl/critic.py
                                 entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
@@ -165,11 +203,10 @@ class PPOTrainer:
                            reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
         self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=None, average_gae=False)  # values given
         self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
-        if cfg.init_std is not None:  # a resumed run's checkpoint (restore) overwrites it again
-            policy.set_std(cfg.init_std)
+        # init_std was applied by make_actor; a resumed run's checkpoint (restore) overwrites it again
         skip = {id(p) for p in policy.value_head.parameters()} | {id(policy.std_param)}  # head: not PPO's critic
         groups = [{"params": [p for p in policy.trainable_parameters() if id(p) not in skip], "lr": cfg.lr},
-                  {"params": [policy.std_param], "lr": cfg.lr if cfg.std_lr is None else cfg.std_lr}]
+                  {"params": [self.std_owner.std_param], "lr": cfg.lr if cfg.std_lr is None else cfg.std_lr}]
         self.optim = torch.optim.Adam(groups)
         self.base_lrs = [g["lr"] for g in groups]
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
@@ -181,7 +218,8 @@ class PPOTrainer:
 
     def save(self, phase: str = "ppo") -> None:
         if self.checkpointer is not None:
-            critic = {"critic": self.critic.state_dict(), "critic_optimizer": self.critic_optim.state_dict()}
+            critic = {"critic": self.critic.state_dict(), "critic_optimizer": self.critic_optim.state_dict(),
+                      "action_std_param": self.std_owner.std_param.detach().clone()}
             self.checkpointer.save(self.iteration, policy=self.policy, optimizer=self.optim,
                                    counters=self.state_counters(), config=self.config_dict, phase=phase,
                                    extra=critic)
@@ -194,6 +232,9 @@ class PPOTrainer:
             if "critic" in extra:
                 self.critic.load_state_dict(extra["critic"])
                 self.critic_optim.load_state_dict(extra["critic_optimizer"])
+            if "action_std_param" in extra:  # same identity -> same action_dist -> same shape
+                with torch.no_grad():
+                    self.std_owner.std_param.copy_(extra["action_std_param"])
         self.iteration = int(ckpt["counters"].get("ppo_iteration", 0))
         self.frames = int(ckpt["counters"].get("ppo_frames", 0))
         if ckpt.get("rng") is not None:
@@ -229,7 +270,7 @@ class PPOTrainer:
                                           minibatch_size=cfg.minibatch_size, max_grad_norm=cfg.max_grad_norm)
         with torch.no_grad():
             res["losses/explained_variance_after_fit"] = explained_variance(self.critic(xf), target)
-        res["losses/std_mean"] = float(self.policy.scale().detach().mean())
+        res["losses/std_mean"] = float(self.std_owner.scale().detach().mean())
         return res
 
     def _actor_epochs(self, flat: TensorDictBase) -> dict[str, float]:

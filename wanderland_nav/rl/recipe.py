@@ -45,6 +45,7 @@ class Recipe:
     first_row: str = "untrained"
     bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: a MultiSceneNavEnv, global episodes); None: env_fn
     ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
+    kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
 
 
 def _load_results(path: Path, state, identity_hash: str) -> dict:
@@ -121,7 +122,8 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         rows.append("BC")
     if r.ppo is not None:
         trainer = PPOTrainer(r.policy, train_env if train_env is not None else r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
-                             ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress)
+                             ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress,
+                             kinematics=r.kinematics)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)

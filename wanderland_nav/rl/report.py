@@ -93,16 +93,22 @@ def _layout(head: list[str], body: list[list[str]]) -> list[str]:
 
 
 def seed_table(runs: Mapping[str, Sequence[Sequence[Mapping]]], baseline: str | None = None,
-               columns: Sequence[str] = TABLE_COLUMNS, iqm: Sequence[str] = ()) -> str:
+               columns: Sequence[str] = TABLE_COLUMNS, iqm: Sequence[str] = (),
+               pairs: Sequence[tuple[str, str]] = ()) -> str:
     """`runs`: row name -> per-seed episode records (S lists of N records, same episodes in every row).
 
     One row per name: mean [95 % interval]; then one `name - baseline` row per other name with the
-    paired difference over the same seeds and episodes. `iqm`: columns that also get an IQM row.
+    paired difference over the same seeds and episodes, and one `a - b` row per extra pair in `pairs`
+    (e.g. `("BC+RL", "BC")`: the RL gain beside the gains over the untrained policy). `iqm`: columns that
+    also get an IQM row.
     """
     if not runs:
         raise ValueError("seed_table: no rows")
     if baseline is not None and baseline not in runs:
         raise KeyError(f"seed_table: baseline {baseline!r} not among rows {list(runs)}")
+    unknown = [p for p in pairs if p[0] not in runs or p[1] not in runs]
+    if unknown:
+        raise KeyError(f"seed_table: pairs {unknown} name rows not among {list(runs)}")
     seeds = {len(r) for r in runs.values()}
     n = {len(rec) for r in runs.values() for rec in r}
     recs = [x for r in runs.values() for rec in r for x in rec]
@@ -116,24 +122,23 @@ def seed_table(runs: Mapping[str, Sequence[Sequence[Mapping]]], baseline: str | 
             e = seed_aggregate(_scores(r, c))["iqm"]
             body.append([f"{name} IQM", str(len(r)), *(_cell(e, c) if k == c else "" for k in columns)])
     notes = []
-    if baseline is not None:
-        base = runs[baseline]
-        for name, r in runs.items():
-            if name == baseline:
-                continue
-            if not _same_episodes(r, base):
-                notes.append(f"{name} - {baseline}: not the same episodes/seeds, no paired difference")
-                continue
-            cells = [_delta_cell(paired_difference(_scores(r, c), _scores(base, c)), estimate(base, c).value, c)
-                     for c in columns]
-            body.append([f"{name} - {baseline}", "paired", *cells])
+    differences = [(name, baseline) for name in runs if baseline is not None and name != baseline]
+    differences += [p for p in pairs if p not in differences and p[0] != p[1]]
+    for name, ref in differences:
+        r, base = runs[name], runs[ref]
+        if not _same_episodes(r, base):
+            notes.append(f"{name} - {ref}: not the same episodes/seeds, no paired difference")
+            continue
+        cells = [_delta_cell(paired_difference(_scores(r, c), _scores(base, c)), estimate(base, c).value, c)
+                 for c in columns]
+        body.append([f"{name} - {ref}", "paired", *cells])
     lines = _layout(head, body)
     what = f"{max(n)} episodes" + (f" x {max(seeds)} seeds" if max(seeds) > 1 else "")
     how = "bootstrap over seeds and episodes" if max(seeds) > 1 else "SR/IR Wilson, others bootstrap over episodes"
     lines.append(f"mean [95% interval] over {what}: {how}")
-    if baseline is not None and len(runs) > 1:
+    if differences:
         lower = "/".join(c for c in columns if c in LOWER_IS_BETTER)
-        lines.append(f"'- {baseline}' rows: paired difference over the same episodes; (+x%) change vs {baseline} "
+        lines.append(f"'a - b' rows: paired difference over the same episodes; (+x%) change vs b "
                      f"signed so + is better ({lower} lower is better), shown only where the interval excludes 0")
     if missing:
         notes.append(f"not in these records (written by an older version): {', '.join(missing)}")
@@ -141,9 +146,14 @@ def seed_table(runs: Mapping[str, Sequence[Sequence[Mapping]]], baseline: str | 
 
 
 def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None = None,
-                     columns: Sequence[str] = TABLE_COLUMNS) -> str:
+                     columns: Sequence[str] = TABLE_COLUMNS, pairs: Sequence[tuple[str, str]] = ()) -> str:
     """One evaluation per row: `rows` name -> its per-episode records (`EvaluationResult.records`)."""
-    return seed_table({k: [v] for k, v in rows.items()}, baseline, columns)
+    return seed_table({k: [v] for k, v in rows.items()}, baseline, columns, pairs=pairs)
+
+
+def successive_pairs(rows: Sequence[str]) -> list[tuple[str, str]]:
+    """`[untrained, BC, BC+RL]` -> `[(BC, untrained), (BC+RL, BC)]`: what each training phase added."""
+    return list(zip(rows[1:], rows[:-1]))
 
 
 def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
@@ -172,8 +182,8 @@ def main(argv: Sequence[str] | None = None) -> str:
     ap.add_argument("--baseline", default=None, help="row to difference against (default: the first)")
     ap.add_argument("--iqm", nargs="*", default=[], help="columns that also get an IQM row, e.g. NE SPL")
     a = ap.parse_args(argv)
-    runs = load_seed_runs(a.results)
-    table = seed_table(runs, a.baseline or next(iter(runs)), iqm=a.iqm)
+    runs = load_seed_runs(a.results)  # beside '- baseline': each row minus the one before it (BC+RL - BC)
+    table = seed_table(runs, a.baseline or next(iter(runs)), iqm=a.iqm, pairs=successive_pairs(list(runs)))
     print(table)
     return table
 
