@@ -144,6 +144,12 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     for r in rows.values():
         assert r["episodes"] == 2 and 0.0 <= r["SR"] <= 1.0 and r["NE"] >= 0.0
     ck = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    rounds = ck["config"]["algo"]["bc"]["rounds"]  # a checkpoint per BC round; the last one is bc.pt
+    ckdir = tmp_path / "run" / "checkpoints"
+    assert sorted(p.name for p in ckdir.glob("bc_round*.pt")) == [f"bc_round{k}.pt" for k in range(1, rounds + 1)]
+    last_round, bc = load_checkpoint(ckdir / f"bc_round{rounds}.pt"), load_checkpoint(ckdir / "bc.pt")
+    assert last_round["phase"] == f"bc_round{rounds}"
+    assert all(torch.equal(v, bc["policy"][n]) for n, v in last_round["policy"].items())
     if rl:
         assert ck["phase"] == "ppo_done" and ck["counters"] == {"ppo_iteration": 2, "ppo_frames": 16}
     else:

@@ -122,6 +122,53 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
         study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
 
 
+
+def test_bc_round_phases_are_fixed_policies_with_their_own_checkpoint(tmp_path):
+    from wanderland_nav.compose.study_cells import StudyCells, phase_checkpoint
+
+    c = _config(tmp_path, seeds=[0], fixed_policies=["untrained", "BC-round1", "BC"])
+    cells = plan_cells(c.study)
+    r1 = [x for x in cells if x.kind == "eval" and x.policy == (GROUNDED, "BC-round1")]
+    assert {x.env for x in r1} == {GROUNDED, "scale_1.2", "holes"} and all(x.needs[0] == "train/grounded/seed0" for x in r1)
+    assert phase_checkpoint("BC-round12") == "checkpoints/bc_round12.pt" and phase_checkpoint("BC") == "checkpoints/bc.pt"
+    for bad in ("BC-round0", "BC-round", "BC-roundx"):
+        with pytest.raises(ValueError, match="BC-round<k>"):
+            plan_cells(_config(tmp_path, fixed_policies=[bad]).study)
+    ex = StudyCells(c, tmp_path, None, cells)  # the train cell ran before per-round checkpoints existed
+    with pytest.raises(FileNotFoundError, match=r"bc_round1.pt: the BC-round1 checkpoint of train/grounded/seed0 is "
+                                                r"missing[\s\S]*study_backfill"):
+        ex(r1[0], tmp_path / "eval")
+
+
+def test_a_train_cell_made_with_another_recipe_is_refused_not_reused(tmp_path):
+    """The cell hash covers study.train (overrides), not the defaults they resolve against: a done train cell
+    whose recorded config differs from today's composition must stop the study, naming the key."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from wanderland_nav.compose.study_cells import StudyCells
+
+    c = _config(tmp_path, seeds=[0], presets=["holes"], train=["+exp=citywalker_rl", "debug=smoke"])
+    cells = plan_cells(c.study)
+    ex = StudyCells(c, tmp_path, None, cells)
+    key = "train/grounded/seed0"
+    folder = ex.cell_dir(key)
+    folder.mkdir(parents=True)
+    recorded = OmegaConf.to_container(ex.train_config(GROUNDED, 0, run_dir=folder), resolve=True)
+    recorded["scene"]["path"] = "/elsewhere/copy/of/the/scene"  # the cell's own: a copied study still matches
+    m = Manifest(tmp_path / "done.json")
+    m.record(key, {"hash": ex.digests[key], "status": "done", "dir": str(folder)})
+    (folder / "config.yaml").write_text(yaml.safe_dump(recorded))
+    ex.check_trained_recipes(m)
+    recorded["algo"]["ppo"]["lr"] = 1.0  # e.g. conf/algo changed after the cell ran; study.train did not
+    (folder / "config.yaml").write_text(yaml.safe_dump(recorded))
+    with pytest.raises(RuntimeError, match=r"train/grounded/seed0 was trained with another recipe[\s\S]*"
+                                           r"algo.ppo.lr: 1.0 -> "):
+        ex.check_trained_recipes(m)
+    accept = dataclasses.replace(c, study=dataclasses.replace(c.study, accept_recipe_changes=["algo.ppo.lr"]))
+    StudyCells(accept, tmp_path, None, cells).check_trained_recipes(m)
+
+
 # ------------------------------------------------------------------ cross-evaluation tables
 
 

@@ -101,6 +101,7 @@ def test_same_route_tables_pair_on_the_kept_routes_and_rank_many_policies():
     routes = {"drift": {"asked": 60, "kept": 30, "dropped": {"goal unreachable": 30}}}
     text, chart, taus = fig8_same_routes(records, ["grounded", "drift"], policies, [0], routes, resamples=200)
     assert "30 of 60 grounded routes kept" in text and "over 4 policies" in text
+    assert "drift BC+RL (trained here), rank of 4 by SR, per seed: in grounded [2] -> in drift [3]" in text
     assert taus["drift"]["policies"] == 4 and taus["drift"]["tau"] == -1.0
     assert "grounded BC+RL: SR 0.400 -> 0.600 (+0.200 [" in text  # paired on the kept routes
     assert set(chart["SR"]) == {"grounded", "drift"} and set(chart["SR"]["drift"]) == {"untrained", "grounded BC+RL"}
@@ -118,3 +119,42 @@ def test_same_route_tables_pair_on_the_kept_routes_and_rank_many_policies():
     same = torch.tensor([0.1, 0.5, 0.9, 0.3])[:, None, None].expand(4, 1, 50).double()
     a = paired_rank_agreement(same, same, resamples=50)
     assert (a["tau"], a["low"], a["high"]) == (1.0, 1.0, 1.0)
+
+
+def test_rank_agreement_per_seed_and_over_seeds():
+    """Seed 0's policies rank as in grounded, seed 1's reversed: per seed +1 and -1; the mean over seeds
+    is 0 and its interval, which draws seeds too, spans both (a tau of seed-averaged scores would not)."""
+    from wanderland_nav.degrade.crosseval_routes import paired_rank_agreement
+
+    base = torch.tensor([0.1, 0.4, 0.7, 0.9]).double()
+    ref = base[:, None, None].expand(4, 2, 40)
+    other = torch.stack([base, base.flip(0)], 1)[:, :, None].expand(4, 2, 40)  # [P, S, N]
+    a = paired_rank_agreement(ref, other, resamples=400)
+    assert [t["tau"] for t in a["per_seed"]] == [1.0, -1.0]
+    assert [(t["low"], t["high"]) for t in a["per_seed"]] == [(1.0, 1.0), (-1.0, -1.0)]
+    assert (a["tau"], a["low"], a["high"], a["undefined"]) == (0.0, -1.0, 1.0, 0)
+
+
+def test_same_route_tables_print_per_seed_taus():
+    from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
+
+    ids = list(range(20))
+    policies = [("grounded", "untrained"), ("grounded", "BC-round1"), ("grounded", "BC")]
+    records = {}
+    for k, pol in enumerate(policies):
+        for s in (0, 1):
+            records[("grounded", s, *pol)] = _recs(ids, np.arange(20) % 4 < k + 1)
+            records[("drift", s, *pol)] = _recs(ids, np.arange(20) % 4 < (k + 1 if s == 0 else 3 - k))
+    text, _, taus = fig8_same_routes(records, ["grounded", "drift"], policies, [0, 1],
+                                     {"drift": {"asked": 20, "kept": 20, "dropped": {}}}, resamples=100)
+    assert "over 3 policies, mean of 2 seeds' taus (bootstrap over seeds and routes): +0.00 [-1.00, +1.00]" in text
+    assert "per seed (bootstrap over routes): seed 0 +1.00 [" in text and "seed 1 -1.00 [" in text
+    assert "grounded BC-round1" in text
+
+
+def test_rank_of_shares_the_better_rank_on_ties():
+    from wanderland_nav.degrade.crosseval_routes import rank_of
+
+    scores = torch.tensor([[0.9, 0.2], [0.9, 0.5], [0.1, 0.5]])  # [P=3, S=2]
+    assert rank_of(scores, 1).tolist() == [1, 1] and rank_of(scores, 2).tolist() == [3, 1]
+    assert rank_of(scores, 0).tolist() == [1, 3]

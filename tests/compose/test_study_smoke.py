@@ -6,6 +6,7 @@ import json
 import shutil
 
 import pytest
+import torch
 
 pytestmark = pytest.mark.slow
 
@@ -26,6 +27,7 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
     assert "Table 3 analogue" in table and "scale_1.2 BC+RL - grounded BC+RL" in table
     assert "-- in holes" in table and "episodes in scale_1.2" in table
     assert "SAME ROUTES" in table and "grounded routes kept" in table and "misranking test" in table
+    assert "grounded BC-round1: SR" in table  # the policy after BC's first round, a fixed policy
     routes = json.loads(next((out / "cells" / "eval").glob("holes_grounded-BC_routes_seed0_*/result.json")).read_text())
     assert all(r["episode_id"] in {e["episode_id"] for e in json.loads(next((out / "routes").glob("routes_holes*"))
                                                                          .read_text())["episodes"]}
@@ -37,3 +39,18 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
     again = run(compose_config("study", overrides))  # every cell done: nothing re-runs, the table is the same
     assert json.loads((out / "done.json").read_text()) == manifest
     assert again["table"].read_text().split("\n", 2)[2] == table.split("\n", 2)[2]  # past the timing header
+
+    # a study made before per-round BC checkpoints: the backfill re-runs BC and restores the same weights
+    from wanderland_nav.rl.checkpoint import load_checkpoint
+
+    cell = next((out / "cells" / "train").glob("grounded_seed0_*"))
+    rounds = sorted(p.name for p in (cell / "checkpoints").glob("bc_round*.pt"))
+    assert rounds == ["bc_round1.pt", "bc_round2.pt"]
+    (tmp_path / "orig").mkdir()
+    for name in rounds:
+        (cell / "checkpoints" / name).rename(tmp_path / "orig" / name)
+    run(compose_config("study", [*overrides, "backfill_bc_rounds=[grounded]"]))
+    for name in rounds:
+        new, old = (load_checkpoint(d / name)["policy"] for d in (cell / "checkpoints", tmp_path / "orig"))
+        assert all(torch.equal(v, old[k]) for k, v in new.items()), name
+    assert json.loads((cell / "bc_rounds_provenance.json").read_text())["bc_weights_equal"] is True

@@ -101,3 +101,19 @@ def test_bc_stops_on_a_non_finite_loss_before_the_weights_change(monkeypatch):
         train_bc(p, env, paths, BCConfig(rounds=1, env_steps_per_round=4, updates_per_round=5), progress=False)
     for n, v in p.state_dict().items():
         assert torch.equal(v, snapshot[n]), n
+
+
+def test_on_round_end_sees_each_rounds_weights_in_order():
+    """The recipe's per-round checkpoints (bc_round<k>.pt) hang on this hook: it must run once per round,
+    1-based, with the weights of that round (the last call's weights are the returned policy's)."""
+    torch.manual_seed(0)
+    env = FakeNavEnv((4,), num_waypoints=5)
+    paths = ExpertPaths(list(env.goal_paths().numpy()))
+    p = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
+    seen: list[tuple[int, dict]] = []
+    train_bc(p, env, paths, BCConfig(rounds=3, env_steps_per_round=4, updates_per_round=5), progress=False,
+             on_round_end=lambda k: seen.append((k, {n: v.clone() for n, v in p.state_dict().items()})))
+    assert [k for k, _ in seen] == [1, 2, 3]
+    assert all(torch.equal(v, seen[-1][1][n]) for n, v in p.state_dict().items())
+    changed = [n for n, v in seen[0][1].items() if v.is_floating_point() and not torch.equal(v, seen[1][1][n])]
+    assert changed, "round 2 left every weight of round 1 unchanged"

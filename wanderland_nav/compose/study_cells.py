@@ -12,19 +12,25 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import torch
 from omegaconf import OmegaConf
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.study_config import PROTOCOLS, StudyConfig
+from wanderland_nav.compose.study_config import BC_ROUND, PROTOCOLS, StudyConfig
 from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
 
 log = logging.getLogger("wanderland_nav.study")
 
-#: phase -> checkpoint file inside the producing cell's folder
+#: phase -> checkpoint file inside the producing cell's folder (and `BC-round<k>`: `phase_checkpoint`)
 CHECKPOINTS = {"untrained": "untrained.pt", "BC": "checkpoints/bc.pt", "BC+RL": "checkpoints/last.pt"}
+
+
+def phase_checkpoint(phase: str) -> str:
+    """The checkpoint of `phase` relative to its producing cell's folder (`rl/recipe.py` names them)."""
+    k = BC_ROUND.fullmatch(phase)
+    return f"checkpoints/bc_round{k.group(1)}.pt" if k else CHECKPOINTS[phase]
 
 
 def _compose_inside_hydra(name: str, overrides: list[str]):
@@ -70,10 +76,10 @@ class StudyCells:
         cell = self.cells[key]
         return self.out / "cells" / cell.kind / cell.folder_name(self.digests[key])
 
-    def train_config(self, env: str, seed: int, run_dir: Path | None = None):
-        """`train`'s composed config for `env`: the study's recipe overrides + scene, seed, folder."""
+    def train_config(self, env: str, seed: int, run_dir: Path | None = None, more: Sequence[str] = ()):
+        """`train`'s composed config for `env`: the study's recipe overrides + scene, seed, folder (+ `more`)."""
         extra = [f"scene={self.env_path(env)}", f"seed={seed}", f"device={self.c.device}",
-                 f"exp_name=study_{self.c.study.name}_{env}", "progress=false"]
+                 f"exp_name=study_{self.c.study.name}_{env}", "progress=false", *more]
         extra += [f"threads={self.c.threads}"] if self.c.threads else []
         extra += [f"run_dir={run_dir}"] if run_dir is not None else []
         return _compose_inside_hydra("train", [*self.c.study.train, *extra])
@@ -97,6 +103,33 @@ class StudyCells:
         path = episodes_for_run(scene, Path(own), num=t.episodes.num, seed=t.episodes.seed,
                                 splits=tuple(t.episodes.splits), goal_images=t.episodes.goal_images)
         return scene, path, t
+
+    def check_trained_recipes(self, manifest: Manifest) -> None:
+        """Refuse to reuse a done `train` cell whose recorded config (`config.yaml`, resolved) differs from
+        what `study.train` composes now. A cell's hash covers the `study.train` overrides, not the config
+        defaults and code they resolve against: after e.g. a PPO fix changes `conf/algo`, the same overrides
+        would otherwise reuse the old policies silently. Scene path, seed and threads are the cell's own;
+        `study.accept_recipe_changes` names the keys a user has checked do not matter (listed in the table)."""
+        import yaml
+
+        from wanderland_nav.compose.identity import _flatten, identity_config
+
+        own = ("scene", "seed", "threads")
+        accepted = tuple(self.c.study.accept_recipe_changes)
+        for key, cell in self.cells.items():
+            folder = self.cell_dir(key)
+            if cell.kind != "train" or manifest.status(key, self.digests[key]) != "done":
+                continue
+            recorded = yaml.safe_load((folder / "config.yaml").read_text())
+            now = OmegaConf.to_container(self.train_config(cell.env, cell.seed, run_dir=folder), resolve=True)
+            old, new = (_flatten({k: v for k, v in identity_config(x).items() if k not in own}) for x in (recorded, now))
+            diff = [f"{k}: {old.get(k, '<absent>')!r} -> {new.get(k, '<absent>')!r}" for k in sorted(set(old) | set(new))
+                    if old.get(k) != new.get(k) and not k.startswith(accepted)]
+            if diff:
+                raise RuntimeError(f"{folder}: cell {key} was trained with another recipe than study.train composes "
+                                   "now:\n  " + "\n  ".join(diff) + "\nstart the study in a new out= folder (a cell's "
+                                   "hash covers the overrides, not the defaults they resolve against), or list keys "
+                                   "that do not change results in study.accept_recipe_changes")
 
     # ------------------------------------------------------------------ the cells
     def __call__(self, cell: Cell, folder: Path) -> dict:
@@ -144,7 +177,11 @@ class StudyCells:
         from wanderland_nav.compose.comparison import compare_checkpoints
 
         s = self.c.study
-        ckpt = self.cell_dir(self.needs_producer(cell)) / CHECKPOINTS[cell.policy[1]]
+        ckpt = self.cell_dir(self.needs_producer(cell)) / phase_checkpoint(cell.policy[1])
+        if not ckpt.is_file():  # e.g. a train cell finished before recipe.py kept a checkpoint per BC round
+            raise FileNotFoundError(f"{ckpt}: the {cell.policy[1]} checkpoint of {self.needs_producer(cell)} is missing "
+                                    "(a train cell made before per-round BC checkpoints? "
+                                    "python -m wanderland_nav.compose.study_backfill re-creates them)")
         scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
         routes = {}
         if cell.protocol == "grounded_routes":  # the grounded test routes mapped into this env (counted drops)

@@ -8,11 +8,20 @@ cell composes its config. A typo fails before any cell runs.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
 #: the phases a training run leaves a checkpoint for (`rl/recipe.py`: `bc.pt`, `last.pt`), and the random init
 POLICY_PHASES = ("untrained", "BC", "BC+RL")
+#: also a phase: `BC-round<k>`, the BC policy after its k-th round (`checkpoints/bc_round<k>.pt`): a weaker fixed
+#: policy, so a ranking test has more distinct skill levels than untrained / BC / BC+RL
+BC_ROUND = re.compile(r"BC-round([1-9][0-9]*)")
+
+
+def is_policy_phase(phase: str, *, trained: bool = False) -> bool:
+    """A phase in POLICY_PHASES or `BC-round<k>`; `trained`: one a training run produces (not untrained)."""
+    return (phase in POLICY_PHASES[trained:]) or BC_ROUND.fullmatch(phase) is not None
 #: how a degraded environment is evaluated (Fig. 8): on its own test episodes, or on the grounded ones mapped into it
 PROTOCOLS = ("own", "grounded_routes")
 
@@ -41,6 +50,9 @@ class StudyGroup:
     eval_batch_size: int = 10
     rank_metric: str = "SR"  # the metric policies are ranked by in the Fig.-8 agreement
     bootstrap_resamples: int = 1000
+    # dotted train-config keys (prefixes) whose change since a train cell ran is accepted on reuse, e.g.
+    # env.camera.render_chunk; any other difference refuses the study (`StudyCells.check_trained_recipes`)
+    accept_recipe_changes: List[str] = field(default_factory=list)
     retry_failed: bool = False  # a failed cell (e.g. a navmesh too broken for episodes) is re-run on restart
 
 
@@ -61,6 +73,8 @@ class StudyConfig:
     out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
     threads: Optional[int] = None  # torch intra-op threads for every cell
     report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
+    backfill_bc_rounds: Optional[List[str]] = None  # envs whose done train cells get bc_round<k>.pt (study_backfill)
+    backfill_max_weight_gap: float = 0.0  # 0: only a bit-equal re-run of the cell's BC is copied (study_backfill)
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
 

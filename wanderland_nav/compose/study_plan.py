@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.study_config import POLICY_PHASES, PROTOCOLS, StudyConfig, StudyGroup
+from wanderland_nav.compose.study_config import POLICY_PHASES, PROTOCOLS, StudyConfig, StudyGroup, is_policy_phase
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -41,7 +41,7 @@ class Cell:
     kind: str  # build | init | train | eval
     env: str  # the environment the cell works in: "grounded" or a degradation preset
     seed: int  # the training seed (the degradation seed for `build`)
-    policy: tuple[str, str] | None = None  # eval: (environment trained in, phase in POLICY_PHASES)
+    policy: tuple[str, str] | None = None  # eval: (environment trained in, phase: `is_policy_phase`)
     needs: tuple[str, ...] = field(default=(), compare=False)  # keys of cells that must be done first
     protocol: str = "own"  # eval: the env's own test episodes, or "grounded_routes" (study_routes.py)
 
@@ -71,13 +71,13 @@ def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int, proto
 def _check_grid(s: StudyGroup) -> None:
     if len(set(s.presets)) != len(s.presets) or GROUNDED in s.presets:
         raise ValueError(f"study.presets={s.presets}: names must be distinct and not {GROUNDED!r}")
-    for what, phases, allowed in (("fixed_policies", s.fixed_policies, POLICY_PHASES),
-                                  ("table3_phases", s.table3_phases, POLICY_PHASES[1:]),
-                                  ("ranked_phases", s.ranked_phases, POLICY_PHASES[1:]),
-                                  ("protocols", s.protocols, PROTOCOLS)):
-        bad = [p for p in phases if p not in allowed]
+    for what, names, trained in (("fixed_policies", s.fixed_policies, False), ("table3_phases", s.table3_phases, True),
+                                 ("ranked_phases", s.ranked_phases, True)):
+        bad = [p for p in names if not is_policy_phase(p, trained=trained)]
         if bad:
-            raise ValueError(f"study.{what}: {bad} not among {', '.join(allowed)}")
+            raise ValueError(f"study.{what}: {bad} not among {', '.join(POLICY_PHASES[trained:])}, BC-round<k>")
+    if [p for p in s.protocols if p not in PROTOCOLS]:
+        raise ValueError(f"study.protocols: {s.protocols} not among {', '.join(PROTOCOLS)}")
     if s.trained_presets is not None and not set(s.trained_presets) <= set(s.presets):
         raise ValueError(f"study.trained_presets={s.trained_presets}: not a subset of study.presets={s.presets}")
     if s.ranking_seeds is not None and not set(s.ranking_seeds) <= set(s.seeds):

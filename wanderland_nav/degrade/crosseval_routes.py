@@ -40,19 +40,35 @@ def matched_runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[st
     return cut, e
 
 
+def _finite_interval(samples: torch.Tensor) -> tuple[float, float, int]:
+    """95 % percentile interval of the finite bootstrap samples, and how many were undefined (NaN)."""
+    ok = samples[torch.isfinite(samples)]
+    lo, hi = (float(torch.quantile(ok, 0.025)), float(torch.quantile(ok, 0.975))) if len(ok) else (math.nan,) * 2
+    return lo, hi, int(len(samples) - len(ok))
+
+
 def paired_rank_agreement(ref: torch.Tensor, other: torch.Tensor, *, resamples: int = 1000, seed: int = 0) -> dict:
-    """Kendall tau-b between the policy means of `ref` and `other` (`[P, S, N]`, the SAME N routes and S
-    seeds) with a 95 % bootstrap interval resampling routes jointly on both sides."""
+    """Kendall tau-b between the policies' scores in `ref` and `other` (`[P, S, N]`: the SAME N routes and
+    S seeds), per seed and as the mean of the per-seed taus.
+
+    Why per seed: seed s's P policies are one set of trained networks, i.e. the paper's experiment; the
+    seeds replicate it. Per-seed intervals resample routes (jointly on both sides); the mean's interval
+    resamples seeds AND routes (one route draw shared by every seed, since the routes are shared), so the
+    seed-to-seed spread is in it; a single tau of seed-averaged scores would hide that spread. With S = 1
+    both are the same number and interval. A resample where a drawn seed is all tied is undefined, counted."""
     if ref.shape != other.shape:
         raise ValueError(f"paired_rank_agreement: {tuple(ref.shape)} vs {tuple(other.shape)}: not the same routes")
+    p, s, n = ref.shape
     gen = torch.Generator().manual_seed(seed)
-    idx = torch.randint(ref.shape[-1], (resamples, ref.shape[-1]), generator=gen)  # [R, N]
-    point = float(kendall_tau_b(ref.mean(dim=(1, 2)), other.mean(dim=(1, 2))))
-    taus = kendall_tau_b(ref[:, :, idx].mean(dim=(1, 3)).T, other[:, :, idx].mean(dim=(1, 3)).T)  # [R]
-    ok = taus[torch.isfinite(taus)]
-    lo, hi = (float(torch.quantile(ok, 0.025)), float(torch.quantile(ok, 0.975))) if len(ok) else (math.nan,) * 2
-    return {"tau": point, "low": lo, "high": hi, "undefined": int(resamples - len(ok)), "resamples": resamples,
-            "policies": int(ref.shape[0])}
+    idx = torch.randint(n, (resamples, n), generator=gen)  # [R, N]
+    per_seed = kendall_tau_b(ref.mean(-1).T, other.mean(-1).T)  # [S]
+    boot = kendall_tau_b(ref[:, :, idx].mean(-1).permute(2, 1, 0), other[:, :, idx].mean(-1).permute(2, 1, 0))  # [R, S]
+    means = boot.gather(1, torch.randint(s, (resamples, s), generator=gen)).mean(1)  # [R]: seeds drawn too
+    lo, hi, undefined = _finite_interval(means)
+    seeds = [dict(zip(("low", "high", "undefined"), _finite_interval(boot[:, k])), tau=float(per_seed[k]))
+             for k in range(s)]
+    return {"tau": float(per_seed.mean()), "low": lo, "high": hi, "undefined": undefined, "resamples": resamples,
+            "policies": p, "per_seed": seeds}
 
 
 def _fmt(e: Estimate) -> str:
@@ -61,7 +77,7 @@ def _fmt(e: Estimate) -> str:
 
 def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) -> tuple[list[str], dict | None]:
     """Lines for one degraded env: per policy SR / IR in grounded vs here (paired), then tau."""
-    lines, ref, other, labels = [], [], [], []
+    lines, ref, other, labels, kept = [], [], [], [], []
     for pol in policies:
         m = matched_runs(records, env, pol, seeds)
         if m is None:
@@ -75,16 +91,33 @@ def _env_block(records, env: str, policies, seeds, metric: str, resamples: int) 
         ref.append(scores_of(g, metric))
         other.append(scores_of(e, metric))
         labels.append(lab)
+        kept.append(pol)
     if len(labels) < 2:
         return lines, None
     a = paired_rank_agreement(torch.stack(ref), torch.stack(other), resamples=resamples)
     lines.append(f"   ranking by {metric} in grounded: {ranking_text(labels, torch.stack(ref).mean(dim=(1, 2)))}")
     lines.append(f"   ranking by {metric} in {env}: {ranking_text(labels, torch.stack(other).mean(dim=(1, 2)))}")
+    lines.append(f"   Kendall tau-b over {len(labels)} policies" + (f", mean of {len(seeds)} seeds' taus (bootstrap over "
+                 "seeds and routes)" if len(seeds) > 1 else "") + f": {_tau_text(a, resamples)}")
+    if len(seeds) > 1:
+        lines.append("   per seed (bootstrap over routes): "
+                     + "; ".join(f"seed {sd} {_tau_text(t, resamples)}" for sd, t in zip(seeds, a["per_seed"])))
+    for i in (i for i, pol in enumerate(kept) if pol[0] == env):  # the policy trained in this world: does this world promote it (the paper's misranking)?
+        g, e = (rank_of(torch.stack(x).mean(-1), i) for x in (ref, other))  # [S] ranks, 1 = best
+        lines.append(f"   {labels[i]} (trained here), rank of {len(labels)} by {metric}, per seed: in grounded "
+                     f"{g.tolist()} -> in {env} {e.tolist()}")
+    return lines, a
+
+
+def rank_of(scores: torch.Tensor, i: int) -> torch.Tensor:
+    """Competition rank (1 = best; ties share the better rank) of item `i` in `scores` `[P, S]` -> `[S]`."""
+    return 1 + (scores > scores[i]).sum(0)
+
+
+def _tau_text(a: dict, resamples: int) -> str:
     tau = ("undefined (every policy tied on one side)" if math.isnan(a["tau"])
            else f"{a['tau']:+.2f} [{a['low']:+.2f}, {a['high']:+.2f}]")
-    lines.append(f"   Kendall tau-b over {len(labels)} policies: {tau}"
-                 + (f", undefined (all tied) in {a['undefined']}/{resamples} resamples" if a["undefined"] else ""))
-    return lines, a
+    return tau + (f", undefined (all tied) in {a['undefined']}/{resamples} resamples" if a["undefined"] else "")
 
 
 def _chart(records, envs, policies, seeds) -> dict[str, dict[str, dict[str, Estimate]]]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -149,8 +149,11 @@ def heldout_l1(policy: NavPolicy, data: TensorDict, chunk: int = 256) -> torch.T
 
 
 def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig, *, logger: Logger | None = None,
-             seed: int = 0, progress: bool = True, step_offset: int = 0) -> dict[str, float]:
-    """DAgger-style behaviour cloning in `env`; returns the last round's mean losses and held-out L1."""
+             seed: int = 0, progress: bool = True, step_offset: int = 0,
+             on_round_end: Callable[[int], None] | None = None) -> dict[str, float]:
+    """DAgger-style behaviour cloning in `env`; returns the last round's mean losses and held-out L1.
+    `on_round_end(k)` runs after round k (1-based) with the policy holding that round's weights: the
+    caller's hook to keep a checkpoint per round (weaker fixed policies for ranking studies)."""
     g = torch.Generator().manual_seed(seed)
     spacing = float(policy.waypoint_spacing)
     expert = ExpertActor(paths, policy.num_waypoints, spacing, cfg.expert_noise, generator=g)
@@ -208,6 +211,8 @@ def train_bc(policy: NavPolicy, env: EnvBase, paths: ExpertPaths, cfg: BCConfig,
                      [round(float(x), 3) for x in per_k])
         if logger is not None:
             logger.log_scalars(stats, step)
+        if on_round_end is not None:
+            on_round_end(r + 1)
     pbar.close()
     policy.eval()
     return stats

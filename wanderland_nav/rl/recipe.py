@@ -103,9 +103,13 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         else:
             with _timed(times, "train env"):
                 train_env = (r.bc_env_fn or r.env_fn)()
+            def keep_round(k: int) -> None:  # bc_round<k>.pt: the policy after k rounds (weaker fixed policies)
+                save_checkpoint(ckpt.dir / f"bc_round{k}.pt", policy=r.policy, optimizer=None,
+                                counters={"bc_updates": k * r.bc.updates_per_round}, phase=f"bc_round{k}", **save_kw)
+
             with _timed(times, "BC"):  # every scene of a set: rl.scene_sets.behaviour_cloning
                 stats = behaviour_cloning(r.policy, train_env, r.nav_from_scene, r.bc, logger=r.logger, seed=r.seed,
-                                          progress=r.progress)
+                                          progress=r.progress, on_round_end=keep_round)
             if not (share_env and r.ppo is not None):
                 train_env.close()
                 train_env = None

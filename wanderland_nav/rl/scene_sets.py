@@ -55,12 +55,12 @@ def set_expert_paths(env: MultiSceneNavEnv) -> ExpertPaths:
 
 
 def behaviour_cloning(policy, env, nav_from_scene, cfg: BCConfig, *, logger=None, seed: int = 0,
-                      progress: bool = True) -> dict[str, float]:
+                      progress: bool = True, on_round_end=None) -> dict[str, float]:
     """`train_bc` on one scene's env, or on a set's `MultiSceneNavEnv` (`global_episodes=True`) so every
     scene of the set is cloned; then the samples collected per scene are logged and added to the stats."""
     multi = isinstance(env, MultiSceneNavEnv)
     paths = set_expert_paths(env) if multi else ExpertPaths.from_episodes(env.episodes, nav_from_scene)
-    stats = train_bc(policy, env, paths, cfg, logger=logger, seed=seed, progress=progress)
+    stats = train_bc(policy, env, paths, cfg, logger=logger, seed=seed, progress=progress, on_round_end=on_round_end)
     if multi:
         per_scene = {f"bc/samples/{sid}": n for sid, n in env.samples_by_scene.items()}
         log.info("BC samples per scene (agent-steps, held-out included): %s", env.samples_by_scene)

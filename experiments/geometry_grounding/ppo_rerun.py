@@ -1,0 +1,104 @@
+"""The study's RL half again with another PPO recipe, from the study's OWN BC checkpoints (BC is not re-run).
+
+    python experiments/geometry_grounding/ppo_rerun.py --ppo-out /tmp/study/r6 -- +study=grounding \
+        out=/tmp/study/r5/out source.path=/tmp/study/r3/demo_tiny threads=1
+
+Why a script and not study cells: the study's `train` cell is BC then PPO in one run; when only PPO's
+recipe changes (here the learning issue's `algo.ppo.action_dist=tracked`, now the default), re-running
+BC would cost ~3x the PPO time and change the BC policies the comparison is paired against. So for each
+seed and each environment the study trained in, this runs `train` (library call, the study's composed
+recipe under the CURRENT code and config) with `init_checkpoint=<the study's train cell>/checkpoints/bc.pt`
+(which switches BC off), into `<ppo-out>/train/<env>_seed<s>`, then evaluates its last checkpoint in the
+GROUNDED environment on the same 60 test episodes and seed as the study's Table-3 cells
+(`<ppo-out>/eval/<env>_seed<s>.json`). Both steps resume. It prints the Table-3 analogue: per
+environment BC (the study's cell), BC+RL with the study's old PPO (its cell) and with the new PPO, paired
+over the same episodes and seeds, and the new BC+RL of each world against the new grounded BC+RL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+import torch
+
+from wanderland_nav.atomic import atomic_write_json, atomic_write_text
+from wanderland_nav.compose.cli import compose_config
+from wanderland_nav.compose.study_cells import StudyCells
+from wanderland_nav.compose.study_config import study_config
+from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells
+from wanderland_nav.rl.report import seed_table
+
+
+def _train_and_eval(ex: StudyCells, env: str, seed: int, root: Path) -> Path:
+    from wanderland_nav.compose.build import load_navmesh
+    from wanderland_nav.compose.comparison import compare_checkpoints
+    from wanderland_nav.train import run as train_run
+
+    result = root / "eval" / f"{env}_seed{seed}.json"
+    if result.is_file():
+        return result
+    bc = ex.cell_dir(f"train/{env}/seed{seed}") / "checkpoints" / "bc.pt"
+    run_dir = root / "train" / f"{env}_seed{seed}"
+    train_run(ex.train_config(env, seed, run_dir=run_dir, more=[f"init_checkpoint={bc}"]))
+    s = ex.c.study
+    scene, episodes, _ = ex.env_episodes(GROUNDED, seed)
+    n = s.eval_episodes
+    _, results, _ = compare_checkpoints([run_dir / "checkpoints" / "last.pt"], scene, episodes, load_navmesh(scene),
+                                        split=s.eval_split, num_episodes=n, batch_size=min(s.eval_batch_size, n),
+                                        device=ex.c.device, seed=seed)
+    res = next(iter(results.values()))
+    atomic_write_json(result, {"env": env, "seed": seed, "init_checkpoint": str(bc), "records": res.records,
+                               "summary": res.summary})
+    return result
+
+
+def _records(manifest: Manifest, key: str):
+    e = manifest.entries.get(key)
+    return None if e is None or e["status"] != "done" else json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
+
+
+def tables(ex: StudyCells, manifest: Manifest, envs: list[str], seeds: list[int], root: Path) -> str:
+    new = {(env, s): json.loads(p.read_text())["records"] for env in envs for s in seeds
+           if (p := root / "eval" / f"{env}_seed{s}.json").is_file()}
+    done = [s for s in seeds if all((env, s) in new for env in envs)]
+    if not done:
+        return "no seed has every environment's new-PPO evaluation yet"
+    out = [f"seeds with every environment done: {done}; evaluated in the GROUNDED world, test split"]
+    for env in envs:
+        runs = {"BC": [_records(manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC") for s in done],
+                "BC+RL old PPO": [_records(manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC+RL") for s in done],
+                "BC+RL new PPO": [new[env, s] for s in done]}
+        out += [f"-- trained in {env}", seed_table(runs, baseline="BC", pairs=[("BC+RL new PPO", "BC+RL old PPO")])]
+    cross = {f"{env} BC+RL new PPO": [new[env, s] for s in done] for env in envs}
+    out += ["-- Table 3 with the new PPO: BC+RL trained in <env> vs trained in grounded (paired)",
+            seed_table(cross, baseline=f"{GROUNDED} BC+RL new PPO")]
+    return "\n".join(out)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ppo-out", type=Path, required=True)
+    ap.add_argument("--report-only", action="store_true")
+    args, overrides = ap.parse_known_args()
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout)
+    c = study_config(compose_config("study", [o for o in overrides if o != "--"]))
+    if c.threads:
+        torch.set_num_threads(c.threads)
+    ex = StudyCells(c, Path(c.out), None, plan_cells(c.study))
+    manifest = Manifest(Path(c.out) / MANIFEST)
+    envs = [GROUNDED, *(p for p in c.study.presets if c.study.trained_presets is None or p in c.study.trained_presets)]
+    for seed in ([] if args.report_only else c.study.seeds):  # whole seeds first: a run cut short has whole rows
+        for env in envs:
+            _train_and_eval(ex, env, seed, args.ppo_out)
+    text = tables(ex, manifest, envs, list(c.study.seeds), args.ppo_out)
+    atomic_write_text(args.ppo_out / "table.txt", text + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
