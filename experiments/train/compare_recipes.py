@@ -28,10 +28,11 @@ def runs_by_seed(pattern: str) -> dict[int, dict]:
     for folder in sorted(glob.glob(pattern)):
         m = re.search(r"_s(?:eed)?(\d+)$", folder.rstrip("/"))
         path = Path(folder) / "results.json"
-        if m and path.is_file():
-            out[int(m.group(1))] = json.loads(path.read_text())
+        rows = json.loads(path.read_text()) if m and path.is_file() else {}
+        if "init" in rows and "RL" in rows:  # a run still training has no RL row yet
+            out[int(m.group(1))] = rows
     if not out:
-        raise SystemExit(f"{pattern}: no run folder ending in _s<seed> / _seed<seed> with a results.json")
+        raise SystemExit(f"{pattern}: no run folder ending in _s<seed> / _seed<seed> whose results.json has init and RL")
     return out
 
 
