@@ -51,6 +51,19 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
+def softplus_std(raw: torch.Tensor, min_std: float) -> torch.Tensor:
+    """Exploration std from its raw parameter: `min_std + softplus(raw)` (smooth, never below min_std)."""
+    return min_std + F.softplus(raw)
+
+
+@torch.no_grad()
+def fill_softplus_std(raw: torch.Tensor, std: float, min_std: float, owner: str) -> None:
+    """Set every entry of `raw` so that `softplus_std(raw, min_std) == std` (the softplus inverse)."""
+    if not std > min_std:
+        raise ValueError(f"{owner}: std={std} must exceed min_std={min_std}")
+    raw.fill_(math.log(math.expm1(std - min_std)))
+
+
 class WaypointNormal(D.Independent):
     """Independent Normal over the last two dims (`[K, 2]` waypoints): one log-prob per sample.
 
@@ -176,15 +189,12 @@ class NavPolicy(TensorDictModuleBase):
 
     # ------------------------------------------------------------------ PPO interface
     def scale(self) -> torch.Tensor:  # [K, 2]
-        return self.min_std + F.softplus(self.std_param)
+        return softplus_std(self.std_param, self.min_std)
 
-    @torch.no_grad()
     def set_std(self, std: float) -> None:
         """Every waypoint coordinate's exploration std := `std` metres. PPO's `init_std` uses it: BC never
         trains the std, so a BC policy would otherwise explore with the config's `init_std`."""
-        if not std > self.min_std:
-            raise ValueError(f"{type(self).__name__}: std={std} must exceed min_std={self.min_std}")
-        self.std_param.fill_(math.log(math.expm1(std - self.min_std)))
+        fill_softplus_std(self.std_param, std, self.min_std, type(self).__name__)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         obs, lead = self._gather(td)

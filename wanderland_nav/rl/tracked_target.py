@@ -19,16 +19,13 @@ exactly as the policy's own K waypoints do (tested); evaluation keeps using the 
 
 from __future__ import annotations
 
-import math
-
 import torch
-import torch.nn.functional as F
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torch import distributions as D
 from torch import nn
 
-from policies.base import NavPolicy
+from policies.base import NavPolicy, fill_softplus_std, softplus_std
 from wanderland_nav import keys as K
 from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.envs.kinematics import finite_actions, select_waypoint
@@ -93,13 +90,10 @@ class TrackedTargetActor(TensorDictModuleBase):
         self.set_std(float(policy.scale().detach()[0].mean()) if init_std is None else init_std)
 
     def scale(self) -> torch.Tensor:  # [2]
-        return self.policy.min_std + F.softplus(self.std_param)
+        return softplus_std(self.std_param, self.policy.min_std)
 
-    @torch.no_grad()
     def set_std(self, std: float) -> None:
-        if not std > self.policy.min_std:
-            raise ValueError(f"TrackedTargetActor: std={std} must exceed the policy's min_std={self.policy.min_std}")
-        self.std_param.fill_(math.log(math.expm1(std - self.policy.min_std)))
+        fill_softplus_std(self.std_param, std, self.policy.min_std, "TrackedTargetActor")
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         self.policy(td)
