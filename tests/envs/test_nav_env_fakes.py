@@ -99,6 +99,7 @@ def test_walls_block_and_stuck_agents_are_intervened():
     (m,) = env.pop_finished_metrics()
     # path length is horizontal (the ramp climb of 0.01 m is not counted), like the geodesic it is compared with
     assert m.intervention and not m.success and m.collisions == 4 and m.path_length == pytest.approx(0.2, abs=1e-5)
+    assert m.intervention_cause == "stuck"
 
 
 def test_timeout_is_truncation_not_intervention():
@@ -114,6 +115,7 @@ def test_timeout_is_truncation_not_intervention():
     assert nxt[keys.TRUNCATED].all() and not nxt[keys.TERMINATED].any() and not nxt[keys.INTERVENTION].any()
     ms = env.pop_finished_metrics()
     assert len(ms) == 2 and all(m.timeout and not m.intervention and m.steps == 5 and m.spl == 0 for m in ms)
+    assert [m.intervention_cause for m in ms] == ["", ""]  # a timeout has no intervention cause
 
 
 def test_partial_reset_only_touches_masked_agents():
