@@ -71,3 +71,14 @@ def test_ir_by_cause_columns_from_records(tmp_path, capsys):
     cells = re.split(r"\s{2,}", lines[1].strip())
     assert lines[0].split()[2:] == ["IR", "IR_stuck", "IR_no_progress", "IR_off_navmesh"]
     assert [c.split()[0] for c in cells[2:]] == ["0.375", "0.250", "0.125", "0.000"]
+
+
+def test_sampled_rows_pair_within_their_mode_and_against_bc():
+    """eval.sampled_rows: each phase's gain per evaluation mode, and the trained policy sampled vs BC's mean."""
+    from wanderland_nav.rl.report import successive_pairs
+
+    rows = ["untrained", "untrained sampled", "BC", "BC sampled", "BC+RL", "BC+RL sampled"]
+    assert successive_pairs(rows) == [("BC", "untrained"), ("BC+RL", "BC"), ("BC sampled", "untrained sampled"),
+                                      ("BC+RL sampled", "BC sampled"), ("BC+RL sampled", "BC")]
+    assert successive_pairs(["init", "RL", "init sampled", "RL sampled"]) == [
+        ("RL", "init"), ("RL sampled", "init sampled"), ("RL sampled", "init")]

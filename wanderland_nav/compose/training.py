@@ -133,8 +133,9 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
     recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
-                    evaluate=lambda name, pol, env, step: evaluate(name, pol, env, step, logger, episodes_path),
+                    evaluate=lambda name, pol, env, step, **kw: evaluate(name, pol, env, step, logger, episodes_path,
+                                                                         **kw),
                     logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
                     num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first, kinematics=env_cfg.kinematics)
+                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows)
     return recipe, scene

@@ -36,6 +36,8 @@ CAUSE_COLUMNS = {f"IR_{c}": c for c in ("off_navmesh", "stuck", "no_progress")}
 FIELDS.update({c: "intervention_cause" for c in CAUSE_COLUMNS})
 LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS}
 RATES = {"SR", "IR", *CAUSE_COLUMNS}
+#: suffix of a row evaluated with sampled actions (the stochastic policy) instead of the mean waypoints
+SAMPLED = " sampled"
 
 
 def relative_change(new: float, base: float, column: str) -> float:
@@ -158,8 +160,17 @@ def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None
 
 
 def successive_pairs(rows: Sequence[str]) -> list[tuple[str, str]]:
-    """`[untrained, BC, BC+RL]` -> `[(BC, untrained), (BC+RL, BC)]`: what each training phase added."""
-    return list(zip(rows[1:], rows[:-1]))
+    """`[untrained, BC, BC+RL]` -> `[(BC, untrained), (BC+RL, BC)]`: what each training phase added.
+
+    Rows evaluated with sampled actions (`"<row> sampled"`, `eval.sampled_rows`) pair among themselves, and the
+    last one also with the second-to-last deterministic row (`BC+RL sampled - BC`: the policy PPO trained, as it
+    was trained, against BC's mean waypoints)."""
+    mean = [r for r in rows if not r.endswith(SAMPLED)]
+    sampled = [r for r in rows if r.endswith(SAMPLED)]
+    pairs = list(zip(mean[1:], mean[:-1])) + list(zip(sampled[1:], sampled[:-1]))
+    if len(sampled) >= 2 and len(mean) >= 2:
+        pairs.append((sampled[-1], mean[-2]))
+    return pairs
 
 
 def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
