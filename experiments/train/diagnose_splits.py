@@ -1,7 +1,8 @@
 """Does a policy fail more on the routes it was not trained on, and why does it fail? (issue 16)
 
     PYTHONPATH=$PWD python experiments/train/diagnose_splits.py --out /tmp/learning/diag7 \\
-        --policy BC /tmp/learning/bc/seed{0,1,2}.pt [--policy BC+RL <last.pt of seeds 0,1,2>] [--run]
+        --policy BC /tmp/learning/bc/seed{0,1,2}.pt [--policy BC+RL <last.pt of seeds 0,1,2>] \\
+        [--policy "BC sampled" <the same BC checkpoints>] [--run]
 
 Each checkpoint (the i-th given is seed i) is evaluated deterministically on the train, val and test episodes of
 the main job's demo scene by the main job's own code and settings: `python -m wanderland_nav.train
@@ -34,14 +35,14 @@ LENGTH_BINS = ((0.0, 15.0), (15.0, 20.0), (20.0, 25.0), (25.0, float("inf")))  #
 
 
 def run_dir(out: Path, policy: str, split: str, seed: int) -> Path:
-    return out / f"{policy.lower().replace('+', 'p')}_{split}_s{seed}"
+    return out / f"{policy.lower().replace('+', 'p').replace(' ', '_')}_{split}_s{seed}"
 
 
-def evaluate(ckpt: str, split: str, seed: int, where: Path) -> None:
+def evaluate(ckpt: str, split: str, seed: int, where: Path, sampled: bool) -> None:
     """The main job's evaluation of `ckpt` on `split` (PPO off: the row is the checkpoint itself)."""
     cmd = [sys.executable, "-m", "wanderland_nav.train", "+exp=citywalker_rl", f"seed={seed}", "threads=1",
            "progress=false", f"init_checkpoint={ckpt}", "algo.ppo.enabled=false", f"eval.split={split}",
-           f"run_dir={where}"]
+           f"eval.deterministic={str(not sampled).lower()}", f"run_dir={where}"]
     print(" ".join(cmd[1:]), flush=True)
     subprocess.run(cmd, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"}, stdout=subprocess.DEVNULL)
 
@@ -98,13 +99,28 @@ def failure_table(runs: dict[str, dict[str, list[list[dict]]]]) -> list[str]:
     return lines
 
 
+def write_seed_results(runs: dict[str, dict[str, list[list[dict]]]], out: Path) -> None:
+    """One train-style results.json per split and seed, rows in the order the policies were given."""
+    from wanderland_nav.atomic import atomic_write_json
+
+    for split in SPLITS:
+        have = {name: by_split[split] for name, by_split in runs.items() if split in by_split}
+        for seed in range(min((len(r) for r in have.values()), default=0)):
+            atomic_write_json(out / split / f"seed{seed}" / "results.json",
+                              {name: {"records": recs[seed]} for name, recs in have.items()})
+
+
 def main(argv=None) -> str:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, required=True, help="folder of the evaluation runs")
     ap.add_argument("--policy", nargs="+", action="append", required=True, metavar=("NAME", "CKPT"),
-                    help="a row name and its checkpoints, seed 0 first")
+                    help="a row name and its checkpoints, seed 0 first; a name ending in ' sampled' is evaluated "
+                         "with sampled actions (eval.deterministic=false, seeded), else with the mean waypoints")
     ap.add_argument("--splits", nargs="+", default=list(SPLITS))
     ap.add_argument("--run", action="store_true", help="evaluate what is missing (one process at a time)")
+    ap.add_argument("--seed-results", type=Path, default=None, metavar="DIR",
+                    help="also write DIR/<split>/seed<i>/results.json with the policies as rows, for "
+                         "`python -m wanderland_nav.rl.report DIR/test/seed*/results.json`")
     a = ap.parse_args(argv)
     runs: dict[str, dict[str, list[list[dict]]]] = {}
     for name, *ckpts in a.policy:
@@ -114,12 +130,14 @@ def main(argv=None) -> str:
             for seed, ckpt in enumerate(ckpts):
                 where = run_dir(a.out, name, split, seed)
                 if a.run and not (where / "results.json").is_file():
-                    evaluate(ckpt, split, seed, where)
+                    evaluate(ckpt, split, seed, where, sampled=name.endswith(" sampled"))
             recs = records(a.out, name, split, len(ckpts))
             if recs is None:
                 print(f"{name} {split}: results missing under {a.out} (pass --run)", file=sys.stderr)
                 continue
             runs.setdefault(name, {})[split] = recs
+    if a.seed_results is not None:
+        write_seed_results(runs, a.seed_results)
     text = "\n".join(sr_table(runs) + [""] + failure_table(runs))
     print(text)
     return text
