@@ -47,7 +47,7 @@ class Recipe:
     bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: a MultiSceneNavEnv, global episodes); None: env_fn
     ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
     kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
-    sampled_rows: bool = False  # every row is evaluated a second time with sampled actions, as "<row> sampled"
+    sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
 
 
 def _load_results(path: Path, state, identity_hash: str) -> dict:
@@ -79,8 +79,8 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
 
     def evaluate(name: str, step: int) -> None:
         evaluate_as(name, step, None)
-        if r.sampled_rows:  # the stochastic policy PPO optimises, beside its mean (experiments/train/README.md)
-            evaluate_as(name + SAMPLED, step, False)
+        if r.sampled_rows and name != "untrained":  # the stochastic policy PPO optimises, beside its mean
+            evaluate_as(name + SAMPLED, step, False)  # (experiments/train/README.md); untrained: noise either way
 
     def evaluate_as(name: str, step: int, deterministic: bool | None) -> None:
         if name in results:
