@@ -166,7 +166,7 @@ class EvalSettings:
     episodes: Optional[int] = None
     batch_size: int = 10
     deterministic: bool = True
-    sampled_rows: bool = False  # also each row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
+    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
 
 
 @dataclass
