@@ -23,7 +23,7 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import comparison_table, row_estimates, successive_pairs
+from wanderland_nav.rl.report import SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 
@@ -36,17 +36,18 @@ def run(cfg: DictConfig) -> dict:
     c: TrainConfig = typed_config(cfg, TrainConfig)
     config = OmegaConf.to_container(cfg, resolve=True)
 
-    def evaluate(name, policy, env, step, logger, episodes_path):
+    def evaluate(name, policy, env, step, logger, episodes_path, deterministic=None):
         wants = bool(getattr(logger, "wants_rollouts", False))  # logger=rerun shows eval renders
+        actor = PolicyActor(policy, c.eval.deterministic if deterministic is None else deterministic, seed=c.seed)
         if isinstance(env, SceneSetEvaluation):  # rows overall, indoor/outdoor and scene/<id>
             if c.save_rollouts or wants:
                 log.warning("eval %s: rollouts are recorded for single scenes only, not for a scene set", name)
-            res = env.run(PolicyActor(policy, c.eval.deterministic), c.eval.episodes, seed=c.seed, name=name,
+            res = env.run(actor, c.eval.episodes, seed=c.seed, name=name,
                           progress=c.progress)
             log.info("eval %s per scene:\n%s", name, res.table)
             return res
         path = Path(c.save_rollouts) / f"{name.replace('+', '_')}.npz" if c.save_rollouts else None
-        return evaluate_and_record(env, PolicyActor(policy, c.eval.deterministic), path, num_episodes=c.eval.episodes,
+        return evaluate_and_record(env, actor, path, num_episodes=c.eval.episodes,
                                    seed=c.seed, name=name, frames=wants, progress=c.progress,
                                    logger=logger if wants else None, step=step,
                                    episodes_path=episodes_path)
@@ -54,8 +55,9 @@ def run(cfg: DictConfig) -> dict:
     recipe, scene = training_recipe(c, config, evaluate)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
-    table = comparison_table({r: results[r]["records"] for r in rows}, baseline=rows[0],
-                             pairs=successive_pairs(rows))  # the RL gain "BC+RL - BC" beside "- untrained"
+    shown = rows + [r + SAMPLED for r in rows if r + SAMPLED in results]  # eval.sampled_rows
+    table = comparison_table({r: results[r]["records"] for r in shown}, baseline=rows[0] if shown == rows else None,
+                             pairs=successive_pairs(shown))  # the RL gain "BC+RL - BC" beside "- untrained"
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
     where = f"set {c.scene.name}" if c.scene.set else scene.name
     header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "

@@ -30,7 +30,7 @@ def test_identity_ignores_cosmetic_keys_and_follows_settings_and_scene(tmp_path)
     assert more["hash"] != base["hash"]
     (tmp_path / "navmesh.npz").write_bytes(b"navmesh v2")  # same folder, another prepared artefact
     assert run_identity(_train_dict(), scene_identity(tmp_path))["hash"] != base["hash"]
-    with pytest.raises(RunIdentityError, match=r"algo.ppo.total_frames: 28800 -> 57600[\s\S]*start fresh"):
+    with pytest.raises(RunIdentityError, match=r"algo.ppo.total_frames: 44800 -> 57600[\s\S]*start fresh"):
         check_resume(base, more, tmp_path, "start fresh with another run_dir=")
     with pytest.raises(RunIdentityError, match="without a recorded identity"):
         check_resume(None, more, tmp_path, "start fresh")

@@ -10,7 +10,8 @@ import torch
 from wanderland_nav.envs.config import KinematicsConfig, NavEnvConfig, RewardConfig, TerminationConfig
 from wanderland_nav.envs.kinematics import integrate_unicycle, plan_motion, select_waypoint
 from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table, spl
-from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, intervention_cause, navigation_reward,
+                                         terminations, update_progress)
 
 
 # ---------------------------------------------------------------- config
@@ -121,6 +122,27 @@ def test_progress_counters_and_terminations():
     s, i, t = terminations(torch.tensor([0.5, 4.0, 4.0]), radius, st, torch.tensor([True, True, False]),
                            torch.full((3,), 10), TerminationConfig(max_steps=10))
     assert s.tolist() == [True, False, False] and i.tolist() == [False, False, True] and t.tolist() == [False, True, False]
+
+
+def test_intervention_cause_names_the_rule_that_fired_with_off_navmesh_first():
+    cfg = TerminationConfig(no_progress_steps=3, stuck_steps=2)
+    # agents: none, no progress, stuck, stuck + no progress, off the navmesh + stuck + no progress
+    st = ProgressState(torch.zeros(5), torch.tensor([0, 3, 0, 4, 5]), torch.tensor([1, 0, 2, 2, 2]))
+    nav = torch.tensor([True, True, True, True, False])
+    code = intervention_cause(st, nav, cfg)
+    names = ["" if c == 0 else INTERVENTION_CAUSES[c - 1] for c in code.tolist()]
+    assert names == ["", "no_progress", "stuck", "stuck", "off_navmesh"]
+    _, i, _ = terminations(torch.full((5,), 9.0), torch.ones(5), st, nav, torch.ones(5, dtype=torch.long), cfg)
+    assert i.tolist() == (code > 0).tolist()  # the same rule as the intervention flag
+
+
+def test_ir_by_cause_sums_to_ir():
+    eps = [_m(i, False, 5.0, 1.0, 4.0, interv=True) for i in range(3)] + [_m(3, True, 0.1, 4.0, 4.0)]
+    for e, cause in zip(eps, ("stuck", "stuck", "off_navmesh")):
+        e.intervention_cause = cause
+    o = aggregate_metrics(eps)["overall"]
+    assert (o["IR_stuck"], o["IR_off_navmesh"], o["IR_no_progress"]) == (0.5, 0.25, 0.0)
+    assert o["IR_stuck"] + o["IR_off_navmesh"] + o["IR_no_progress"] == o["IR"] == 0.75
 
 
 # ---------------------------------------------------------------- metrics

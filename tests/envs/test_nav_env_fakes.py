@@ -99,6 +99,7 @@ def test_walls_block_and_stuck_agents_are_intervened():
     (m,) = env.pop_finished_metrics()
     # path length is horizontal (the ramp climb of 0.01 m is not counted), like the geodesic it is compared with
     assert m.intervention and not m.success and m.collisions == 4 and m.path_length == pytest.approx(0.2, abs=1e-5)
+    assert m.intervention_cause == "stuck"
 
 
 def test_timeout_is_truncation_not_intervention():
@@ -114,6 +115,7 @@ def test_timeout_is_truncation_not_intervention():
     assert nxt[keys.TRUNCATED].all() and not nxt[keys.TERMINATED].any() and not nxt[keys.INTERVENTION].any()
     ms = env.pop_finished_metrics()
     assert len(ms) == 2 and all(m.timeout and not m.intervention and m.steps == 5 and m.spl == 0 for m in ms)
+    assert [m.intervention_cause for m in ms] == ["", ""]  # a timeout has no intervention cause
 
 
 def test_partial_reset_only_touches_masked_agents():
@@ -295,3 +297,33 @@ def test_env_ops_run_on_one_intra_op_thread_and_render_groups_on_the_cores(monke
     assert after == [2, 1]
     assert seen["workers"] and set(seen["workers"]) == {3}  # render groups: the cores
     assert seen["env_threads"] and set(seen["env_threads"]) == {1}  # the env's own ops: one
+
+
+def test_sampled_evaluation_actor_is_seeded_and_restarts_its_noise_at_reset():
+    """eval.deterministic=false: the same evaluation twice gives the same samples (own generator, re-seeded)."""
+    from tensordict import TensorDict
+
+    from wanderland_nav.envs.evaluation import PolicyActor
+
+    class Mean(torch.nn.Module):  # select_action as NavPolicy's: loc, or loc + scale * randn(generator)
+        def __init__(self):
+            super().__init__()
+            self.loc = torch.nn.Parameter(torch.zeros(3, 5, 2))
+
+        def select_action(self, td, deterministic=True, generator=None):
+            noise = torch.randn(self.loc.shape, generator=generator)
+            return td.set(keys.ACTION, self.loc.detach() + (0 if deterministic else 0.3 * noise))
+
+        def reset(self):
+            pass
+
+    def draws(actor, n=3):
+        actor.reset()
+        return torch.stack([actor(TensorDict({}, [3]))[keys.ACTION] for _ in range(n)])
+
+    a = PolicyActor(Mean(), deterministic=False, seed=4)
+    first = draws(a)
+    torch.manual_seed(123)  # the global stream does not matter
+    assert torch.equal(draws(a), first) and first[0].abs().sum() > 0 and not torch.equal(first[0], first[1])
+    assert not torch.equal(draws(PolicyActor(Mean(), deterministic=False, seed=5)), first)
+    assert draws(PolicyActor(Mean(), deterministic=True)).abs().sum() == 0

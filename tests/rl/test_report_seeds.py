@@ -54,3 +54,31 @@ def test_main_job_table_shows_each_phases_paired_gain():
     assert sr.startswith("+0.250 [")                                                # 0.75 - 0.50 over the same 40
     with pytest.raises(KeyError, match=r"pairs \[\('RL', 'BC'\)\] name rows not among"):
         comparison_table(rows, baseline="untrained", pairs=[("RL", "BC")])
+
+
+def test_ir_by_cause_columns_from_records(tmp_path, capsys):
+    """`--columns IR IR_stuck ...`: the intervention rate split by the rule that ended each episode."""
+    from wanderland_nav.envs.rewards import INTERVENTION_CAUSES
+    from wanderland_nav.rl.report import CAUSE_COLUMNS
+
+    assert tuple(CAUSE_COLUMNS.values()) == INTERVENTION_CAUSES  # report spells the env's cause names
+    causes = ["stuck"] * 10 + ["no_progress"] * 5 + [""] * 25
+    recs = [{**r, "intervention": bool(c), "intervention_cause": c} for r, c in zip(_records([0] * 40), causes)]
+    p = tmp_path / "results.json"
+    p.write_text(json.dumps({"BC": {"records": recs}}))
+    lines = main([str(p), "--columns", "IR", "IR_stuck", "IR_no_progress", "IR_off_navmesh"]).splitlines()
+    capsys.readouterr()
+    cells = re.split(r"\s{2,}", lines[1].strip())
+    assert lines[0].split()[2:] == ["IR", "IR_stuck", "IR_no_progress", "IR_off_navmesh"]
+    assert [c.split()[0] for c in cells[2:]] == ["0.375", "0.250", "0.125", "0.000"]
+
+
+def test_sampled_rows_pair_within_their_mode_and_against_bc():
+    """eval.sampled_rows: each phase's gain per evaluation mode, and the trained policy sampled vs BC's mean."""
+    from wanderland_nav.rl.report import successive_pairs
+
+    rows = ["untrained", "untrained sampled", "BC", "BC sampled", "BC+RL", "BC+RL sampled"]
+    assert successive_pairs(rows) == [("BC", "untrained"), ("BC+RL", "BC"), ("BC sampled", "untrained sampled"),
+                                      ("BC+RL sampled", "BC sampled"), ("BC+RL sampled", "BC")]
+    assert successive_pairs(["init", "RL", "init sampled", "RL sampled"]) == [
+        ("RL", "init"), ("RL sampled", "init sampled"), ("RL sampled", "init")]

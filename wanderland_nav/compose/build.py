@@ -44,19 +44,24 @@ def scene_gaussians(scene, max_gaussians: int | None, *, needed: bool = True):
 
 def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_size: int, seed: int, device: str,
                 navmesh, gaussians):
-    """A picklable `() -> NavEnv` over loaded parts (collector workers call it)."""
+    """A picklable `() -> NavEnv` over loaded parts (collector workers call it). `episodes_path`: one file, or
+    several whose `split` episodes are joined (the first file's ids kept, the others' prefixed with their stem)."""
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes import load_episodes
 
     split = split if split is not None else env_cfg.split
-    episodes = load_episodes(episodes_path, split=split)
+    paths = [Path(episodes_path)] if isinstance(episodes_path, (str, Path)) else [Path(p) for p in episodes_path]
+    episodes = load_episodes(paths[0], split=split)
+    for more in paths[1:]:  # extra route files (PPO's ppo_routes): their ids are prefixed to stay unique
+        episodes += [dataclasses.replace(e, episode_id=f"{more.stem}/{e.episode_id}")
+                     for e in load_episodes(more, split=split)]
     if not episodes:
         raise ValueError(f"{episodes_path}: no episodes in split {split!r}")
     goal_images = None
     if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
         from wanderland_nav.envs.episode_table import load_goal_images
 
-        goal_images = load_goal_images(episodes, [Path(episodes_path).parent, Path(scene.root)], env_cfg.camera.height,
+        goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, Path(scene.root)], env_cfg.camera.height,
                                        env_cfg.camera.width, where=str(episodes_path))
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
                    batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)

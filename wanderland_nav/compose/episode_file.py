@@ -64,3 +64,34 @@ def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int
         log.warning("episodes: the generator kept %d of the %d requested episodes (%s)", summary.kept, num,
                     summary.rejections)
     return out
+
+
+def ppo_route_file(scene, base: Path, *, num: int, seed: int, base_seed: int, goal_images: bool) -> Path:
+    """A train-only file of `num` more routes for PPO (`episodes.ppo_routes`), drawn with its own `seed`.
+
+    The evaluation episodes stay those of `base`: the new file has no val/test split. The same seed as
+    `base`'s would redraw `base`'s endpoints (val and test among them), so it is refused. Routes that
+    start and end within 1 m of a val/test route of `base` are counted in the log (near-copies).
+    """
+    if seed == base_seed:
+        raise ValueError(f"episodes.ppo_routes_seed={seed} equals episodes.seed: the extra PPO routes would redraw "
+                         f"{base}'s endpoints, val and test among them; choose another ppo_routes_seed")
+    out = episodes_for_run(scene, None, num=num, seed=seed, splits=(1.0, 0.0, 0.0), goal_images=goal_images)
+    from wanderland_nav.episodes import load_episodes
+
+    held_out = [e for s in ("val", "test") for e in load_episodes(base, split=s)]
+    near = _near_copies(load_episodes(out), held_out) if held_out else 0
+    log.info("episodes: PPO also trains on %s (%d train-only routes, seed %d); %d of them start and end within 1 m "
+             "of one of %s's %d val/test routes", out, num, seed, near, base.name, len(held_out))
+    return out
+
+
+def _near_copies(routes, held_out, radius: float = 1.0) -> int:
+    """How many of `routes` have start and goal both within `radius` m of one held-out route's."""
+    import numpy as np
+    import torch
+
+    ends = lambda eps: torch.as_tensor(np.stack([np.r_[e.start_position, e.goal_position] for e in eps]))  # noqa: E731
+    a, b = ends(routes), ends(held_out)  # [E, 6], [H, 6]: start, goal (scene frame, m)
+    close = (torch.cdist(a[:, :3], b[:, :3]) < radius) & (torch.cdist(a[:, 3:], b[:, 3:]) < radius)  # [E, H]
+    return int(close.any(1).sum())

@@ -143,6 +143,8 @@ class EpisodeSource:
     splits: Tuple[float, float, float] = (0.6, 0.15, 0.25)  # train / val / test fractions
     seed: int = 0
     goal_images: bool = False
+    ppo_routes: int = 0  # PPO also trains on this many more routes (a train-only file drawn with ppo_routes_seed)
+    ppo_routes_seed: int = 1  # must differ from `seed`: the same seed would redraw the val/test routes
 
 
 @dataclass
@@ -164,6 +166,7 @@ class EvalSettings:
     episodes: Optional[int] = None
     batch_size: int = 10
     deterministic: bool = True
+    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
 
 
 @dataclass

@@ -13,7 +13,7 @@ import torch
 from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
                                           make_policy_from_config, scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
-from wanderland_nav.compose.episode_file import episodes_for_run
+from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import TrainConfig
@@ -57,15 +57,21 @@ def _single_scene(c: TrainConfig):
                                          splits=tuple(c.episodes.splits), goal_images=c.episodes.goal_images)
         scene.episodes_path = episodes_path
     goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
+    ppo_files = [episodes_path]  # PPO's routes: the file's train split, and episodes.ppo_routes more (BC keeps the file's)
+    if c.episodes.ppo_routes:
+        ppo_files.append(ppo_route_file(scene, episodes_path, num=c.episodes.ppo_routes, seed=c.episodes.ppo_routes_seed,
+                                        base_seed=c.episodes.seed, goal_images=c.episodes.goal_images))
 
     def envs(env_cfg):
         parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
                      gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
         eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
                                               batch_size=c.eval.batch_size, **parts), **goal)()
-        env_fn = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.train_env.split,
-                                            batch_size=c.train_env.batch_size, **parts), **goal)
-        return eval_env, env_fn, env_fn
+        train = partial(env_factory, scene, env_cfg=env_cfg, split=c.train_env.split,
+                        batch_size=c.train_env.batch_size, **parts)
+        bc_env_fn = GoalInputEnvFn(train(episodes_path), **goal)
+        env_fn = GoalInputEnvFn(train(ppo_files), **goal) if len(ppo_files) > 1 else bc_env_fn
+        return eval_env, env_fn, bc_env_fn
 
     return scene, episodes_path, scene_identity(scene.root, episodes_path), envs
 
@@ -73,6 +79,9 @@ def _single_scene(c: TrainConfig):
 def _scene_set(c: TrainConfig):
     """`scene.set`: every ready scene for BC and PPO (a `MultiSceneNavEnv` each; BC's with global episode
     indices for its expert labels) and per-scene evaluation."""
+    if c.episodes.ppo_routes:
+        raise ValueError("episodes.ppo_routes: extra PPO routes are drawn for a single scene; a scene set (scene.set) "
+                         "trains on every scene's own train split, set episodes.ppo_routes=0")
     paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
                             goal_images=c.episodes.goal_images)
     first = next(iter(paths))
@@ -124,8 +133,9 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
     recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
-                    evaluate=lambda name, pol, env, step: evaluate(name, pol, env, step, logger, episodes_path),
+                    evaluate=lambda name, pol, env, step, **kw: evaluate(name, pol, env, step, logger, episodes_path,
+                                                                         **kw),
                     logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
                     num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first, kinematics=env_cfg.kinematics)
+                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows)
     return recipe, scene

@@ -88,17 +88,28 @@ def interval_table(records: list[dict], name: str) -> str:
 
 
 class PolicyActor(torch.nn.Module):
-    """Evaluation wrapper: a `NavPolicy`'s mean waypoints (or a Gaussian sample) written as `ACTION`."""
+    """Evaluation wrapper: a `NavPolicy`'s mean waypoints (or a Gaussian sample) written as `ACTION`.
 
-    def __init__(self, policy, deterministic: bool = True):
+    Sampled (`deterministic=False`: the stochastic policy PPO optimises) draws from its own generator,
+    re-seeded with `seed` at every `reset()` (the start of an evaluation): the same evaluation twice gives the
+    same records, and two policies evaluated one after the other face the same noise stream.
+    """
+
+    def __init__(self, policy, deterministic: bool = True, seed: int = 0):
         super().__init__()
-        self.policy, self.deterministic = policy, deterministic
+        self.policy, self.deterministic, self.seed = policy, deterministic, int(seed)
+        self.generator: torch.Generator | None = None
 
     def forward(self, td):
-        return self.policy.select_action(td, deterministic=self.deterministic)
+        if not self.deterministic and self.generator is None:
+            self.reset()
+        return self.policy.select_action(td, deterministic=self.deterministic, generator=self.generator)
 
     def reset(self):
         self.policy.reset()
+        if not self.deterministic:
+            device = next(self.policy.parameters()).device
+            self.generator = torch.Generator(device=device).manual_seed(self.seed)
 
 
 def write_results(out: Path, name: str, res: EvaluationResult, meta: dict) -> None:

@@ -10,7 +10,8 @@
   Both lengths are **horizontal** (nav-frame x, y): the navmesh geodesic is a horizontal length
   (`planners` docs), so measuring `p` in 3-D would bias SPL low on ramps and stairs;
 * IR: intervention rate (episodes ended because the agent got stuck, made no progress or left
-  the navigable region; timeouts are counted apart);
+  the navigable region; timeouts are counted apart); IR_stuck / IR_no_progress / IR_off_navmesh split it
+  by the rule that fired (`intervention_cause` on each record; `envs.rewards.INTERVENTION_CAUSES`), they sum to IR;
 * nonfinite_actions: steps in which the policy sent a NaN/inf action (the agent stood still, see
   `envs.kinematics`); any non-zero mean means the policy diverged, whatever SR says.
 
@@ -23,6 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
+
+from wanderland_nav.envs.rewards import INTERVENTION_CAUSES
 
 GROUPS = ("overall", "indoor", "outdoor")
 COLUMNS = ("episodes", "NE", "distance_to_goal", "SR", "SPL", "IR", "path_length", "collisions", "steps",
@@ -49,6 +52,7 @@ class EpisodeMetrics:
     distance_to_goal: float = float("nan")  # geodesic (navmesh) distance from the end position to the goal
     nonfinite_actions: int = 0  # steps with a NaN/inf action (the agent stood still)
     undefined_distance_steps: int = 0  # steps with no geodesic to the goal (NavEnv._step_distance's rule applied)
+    intervention_cause: str = ""  # "" | "off_navmesh" | "stuck" | "no_progress": the rule that ended the episode
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -91,6 +95,7 @@ def _summarise(eps: Sequence[EpisodeMetrics]) -> dict[str, float]:
         "SR": mean(float(e.success) for e in eps),
         "SPL": mean(e.spl for e in eps),
         "IR": mean(float(e.intervention) for e in eps),
+        **{f"IR_{c}": mean(float(e.intervention_cause == c) for e in eps) for c in INTERVENTION_CAUSES},
         "path_length": mean(e.path_length for e in eps),
         "collisions": mean(e.collisions for e in eps),
         "steps": mean(e.steps for e in eps),

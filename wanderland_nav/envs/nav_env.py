@@ -46,7 +46,8 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.metrics import EpisodeMetrics, spl
-from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, intervention_cause, navigation_reward,
+                                         terminations, update_progress)
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
 log = logging.getLogger(__name__)
@@ -293,7 +294,8 @@ class NavEnv(EnvBase):
         terminated = success | intervention
         done = terminated | truncated
         if bool(done.any()):
-            self._record_finished(done.nonzero().flatten(), success, intervention, truncated)
+            cause = intervention_cause(progress, navigable, cfg.termination)  # [B]: which rule (IR by cause)
+            self._record_finished(done.nonzero().flatten(), success, intervention, truncated, cause)
         out = self._observation()
         out.update(
             {
@@ -366,7 +368,7 @@ class NavEnv(EnvBase):
         self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
         self._agent_tokens = put(self._agent_tokens, self.table.instruction_tokens[ep])
 
-    def _record_finished(self, idx, success, intervention, truncated) -> None:
+    def _record_finished(self, idx, success, intervention, truncated, cause) -> None:
         """Stash the metrics of the agents `idx` whose episode just ended (tensors; converted lazily)."""
         ep = self._ep[idx]
         self._finished.append(
@@ -378,6 +380,7 @@ class NavEnv(EnvBase):
                 "nonfinite_actions": self._nonfinite[idx],
                 "success": success[idx],
                 "intervention": intervention[idx],
+                "cause": torch.where(intervention[idx], cause[idx], 0),
                 "timeout": truncated[idx],
                 "path_length": self._path_len[idx],
                 "shortest": self.shortest_length[ep],
@@ -405,6 +408,7 @@ class NavEnv(EnvBase):
                     success=bool(cols["success"][j]),
                     spl=spl(bool(cols["success"][j]), cols["shortest"][j], cols["path_length"][j]),
                     intervention=bool(cols["intervention"][j]),
+                    intervention_cause=INTERVENTION_CAUSES[cols["cause"][j] - 1] if cols["cause"][j] else "",
                     timeout=bool(cols["timeout"][j]),
                     path_length=float(cols["path_length"][j]),
                     shortest_length=float(cols["shortest"][j]),

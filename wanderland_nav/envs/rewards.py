@@ -69,8 +69,25 @@ def terminations(
     reached `max_steps` without either (timeout is not an intervention).
     """
     success = d_now <= radius
-    intervention = (
-        (state.stuck_steps >= cfg.stuck_steps) | (state.steps_without_progress >= cfg.no_progress_steps) | ~navigable
-    ) & ~success
+    intervention = (intervention_cause(state, navigable, cfg) > 0) & ~success
     truncated = (step_count >= cfg.max_steps) & ~success & ~intervention
     return success, intervention, truncated
+
+
+#: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
+#: fire on the same step the first listed wins: leaving the navmesh is the most specific, then stuck (blocked and
+#: motionless for `stuck_steps`), then no progress (the catch-all: `no_progress_steps` without a new best distance)
+INTERVENTION_CAUSES = ("off_navmesh", "stuck", "no_progress")
+
+
+def intervention_cause(state: ProgressState, navigable: torch.Tensor, cfg: TerminationConfig) -> torch.Tensor:
+    """`[B]` long: 1 + index into `INTERVENTION_CAUSES` of the rule that fires, 0 where none does.
+
+    The intervention rule of `terminations` (which also requires no success); kept apart so an episode
+    record can say which rule ended it (IR by cause).
+    """
+    stuck = state.stuck_steps >= cfg.stuck_steps
+    no_progress = state.steps_without_progress >= cfg.no_progress_steps
+    cause = torch.where(no_progress, 3, 0)
+    cause = torch.where(stuck, 2, cause)
+    return torch.where(~navigable, 1, cause).long()

@@ -19,6 +19,7 @@ from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
+from wanderland_nav.rl.report import SAMPLED
 from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")
@@ -34,7 +35,7 @@ class Recipe:
     nav_from_scene: Any  # [3, 3] for the expert paths
     bc: BCConfig | None  # None: no BC phase
     ppo: PPOConfig | None  # None: no PPO phase
-    evaluate: Callable  # (name, policy, env, step) -> EvaluationResult
+    evaluate: Callable  # (name, policy, env, step, deterministic=None) -> EvaluationResult (None: eval.deterministic)
     logger: Any
     run_dir: Path
     config: dict  # stored in checkpoints
@@ -46,6 +47,7 @@ class Recipe:
     bc_env_fn: Callable[[], Any] | None = None  # BC's env (a scene set: a MultiSceneNavEnv, global episodes); None: env_fn
     ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
     kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
+    sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
 
 
 def _load_results(path: Path, state, identity_hash: str) -> dict:
@@ -76,12 +78,17 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     times: dict[str, float] = {}
 
     def evaluate(name: str, step: int) -> None:
+        evaluate_as(name, step, None)
+        if r.sampled_rows and name != "untrained":  # the stochastic policy PPO optimises, beside its mean
+            evaluate_as(name + SAMPLED, step, False)  # (experiments/train/README.md); untrained: noise either way
+
+    def evaluate_as(name: str, step: int, deterministic: bool | None) -> None:
         if name in results:
             return
         r.policy.eval()
         t = time.perf_counter()
         with _timed(times, f"eval {name}"):
-            res = r.evaluate(name, r.policy, r.eval_env, step)
+            res = r.evaluate(name, r.policy, r.eval_env, step, deterministic=deterministic)
         results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
                          "identity": r.identity["hash"], "frames": step}
         atomic_write_json(results_path, results)

@@ -30,8 +30,14 @@ TABLE_COLUMNS = ("NE", "distance_to_goal", "SR", "SPL", "IR")
 FIELDS = {"NE": "navigation_error", "SR": "success", "SPL": "spl", "IR": "intervention",
           "distance_to_goal": "distance_to_goal", "steps": "steps", "collisions": "collisions"}
 #: lower is better for these; the sign of the relative change is flipped so "+" always means better
-LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions"}
-RATES = {"SR", "IR"}
+#: IR split by the rule that ended the episode (`EpisodeMetrics.intervention_cause`); they sum to IR. The names
+#: are `envs.rewards.INTERVENTION_CAUSES` (report sits below envs, so they are spelled here; a test checks they agree)
+CAUSE_COLUMNS = {f"IR_{c}": c for c in ("off_navmesh", "stuck", "no_progress")}
+FIELDS.update({c: "intervention_cause" for c in CAUSE_COLUMNS})
+LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS}
+RATES = {"SR", "IR", *CAUSE_COLUMNS}
+#: suffix of a row evaluated with sampled actions (the stochastic policy) instead of the mean waypoints
+SAMPLED = " sampled"
 
 
 def relative_change(new: float, base: float, column: str) -> float:
@@ -47,6 +53,8 @@ def episode_scores(records: Sequence[Mapping], column: str) -> torch.Tensor:
     field = FIELDS.get(column, column)
     if records and field not in records[0]:
         raise KeyError(f"column {column!r}: records have no field {field!r} (fields: {sorted(records[0])})")
+    if column in CAUSE_COLUMNS:
+        return torch.tensor([float(r[field] == CAUSE_COLUMNS[column]) for r in records], dtype=torch.float64)
     return torch.tensor([float(r[field]) for r in records], dtype=torch.float64)
 
 
@@ -152,8 +160,17 @@ def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None
 
 
 def successive_pairs(rows: Sequence[str]) -> list[tuple[str, str]]:
-    """`[untrained, BC, BC+RL]` -> `[(BC, untrained), (BC+RL, BC)]`: what each training phase added."""
-    return list(zip(rows[1:], rows[:-1]))
+    """`[untrained, BC, BC+RL]` -> `[(BC, untrained), (BC+RL, BC)]`: what each training phase added.
+
+    Rows evaluated with sampled actions (`"<row> sampled"`, `eval.sampled_rows`) pair among themselves, and the
+    last one also with the second-to-last deterministic row (`BC+RL sampled - BC`: the policy PPO trained, as it
+    was trained, against BC's mean waypoints)."""
+    mean = [r for r in rows if not r.endswith(SAMPLED)]
+    sampled = [r for r in rows if r.endswith(SAMPLED)]
+    pairs = list(zip(mean[1:], mean[:-1])) + list(zip(sampled[1:], sampled[:-1]))
+    if len(sampled) >= 2 and len(mean) >= 2:
+        pairs.append((sampled[-1], mean[-2]))
+    return pairs
 
 
 def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
@@ -181,9 +198,12 @@ def main(argv: Sequence[str] | None = None) -> str:
     ap.add_argument("results", nargs="+", type=Path, help="one train results.json per seed")
     ap.add_argument("--baseline", default=None, help="row to difference against (default: the first)")
     ap.add_argument("--iqm", nargs="*", default=[], help="columns that also get an IQM row, e.g. NE SPL")
+    ap.add_argument("--columns", nargs="+", default=list(TABLE_COLUMNS),
+                    help=f"table columns (default {' '.join(TABLE_COLUMNS)}; IR by cause: {' '.join(CAUSE_COLUMNS)})")
     a = ap.parse_args(argv)
     runs = load_seed_runs(a.results)  # beside '- baseline': each row minus the one before it (BC+RL - BC)
-    table = seed_table(runs, a.baseline or next(iter(runs)), iqm=a.iqm, pairs=successive_pairs(list(runs)))
+    table = seed_table(runs, a.baseline or next(iter(runs)), columns=a.columns, iqm=a.iqm,
+                       pairs=successive_pairs(list(runs)))
     print(table)
     return table
 
