@@ -80,7 +80,8 @@ def rasterization(
     tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
     lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
-    packed projection's EWA stage through torch.compile (`compiled.py`; eager fallback with one warning).
+    covariances, the packed projection's EWA stage and the forward composite's chunks through
+    torch.compile (`compiled.py`; eager fallback with one warning).
     """
     _check_options(packed=packed, compiled=compiled, render_mode=render_mode, rasterize_mode=rasterize_mode,
                    camera_model=camera_model, sparse_grad=sparse_grad, absgrad=absgrad, distributed=distributed,
