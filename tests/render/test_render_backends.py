@@ -87,6 +87,8 @@ def test_compile_failure_falls_back_to_eager_with_one_warning(monkeypatch):
     monkeypatch.setattr(torch, "compile", broken)
     monkeypatch.setattr(compiled_mod, "_warned", False)
     monkeypatch.setattr(compiled_mod, "project_pairs_compiled", CompiledStage(compiled_mod._project_pairs))
+    monkeypatch.setattr(compiled_mod, "covariances_compiled", CompiledStage(compiled_mod.quat_scale_to_covar))
+    monkeypatch.setattr(compiled_mod, "fused_chunk_compiled", CompiledStage(compiled_mod.fused_chunk))
     args = random_scene(60, 2, W, H, torch.float32)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -6,7 +6,8 @@ import torch
 from render_dense_reference import random_scene
 
 from wanderland_nav.render import rasterization
-from wanderland_nav.render.rasterize import ALPHA_MIN, _tile_test_rows, _touches_tile, isect_packed
+from wanderland_nav.render.binning import _tile_test_rows, _touches_tile, isect_packed
+from wanderland_nav.render.rasterize import ALPHA_MIN
 
 TS = 4
 
@@ -66,8 +67,8 @@ def test_tile_test_drops_entries_without_changing_the_image():
 def test_blocked_projection_and_binning_match_one_block(monkeypatch):
     """Many small L2 blocks (pairs of the EWA stage, entries of the tile expansion) give the same
     image, meta and gradients as one block: blocking is a schedule, not an approximation."""
+    import wanderland_nav.render.binning as binning
     import wanderland_nav.render.packed as packed
-    import wanderland_nav.render.rasterize as rasterize
 
     args = list(random_scene(300, 3, 40, 32, torch.float64, seed=5))
     args[:6] = [a.detach().requires_grad_() for a in args[:6]]  # Gaussians and viewmats
@@ -79,7 +80,7 @@ def test_blocked_projection_and_binning_match_one_block(monkeypatch):
 
     one = run()
     monkeypatch.setattr(packed, "PAIR_BLOCK", 37)
-    monkeypatch.setattr(rasterize, "CACHE_BLOCK", 53)
+    monkeypatch.setattr(binning, "CACHE_BLOCK", 53)
     many = run()
     assert one[1]["camera_ids"].numel() > 10 * 37  # many blocks really ran
     torch.testing.assert_close(many[0], one[0], atol=1e-12, rtol=0)
@@ -90,7 +91,7 @@ def test_blocked_projection_and_binning_match_one_block(monkeypatch):
 
 
 def test_padded_stable_sort_equals_torch_stable_sort_with_ties_and_the_pad_value():
-    from wanderland_nav.render.rasterize import PAD_TO_RADIX, RADIX_MIN, stable_sort
+    from wanderland_nav.render.binning import PAD_TO_RADIX, RADIX_MIN, stable_sort
 
     g = torch.Generator().manual_seed(3)
     for dtype, n in ((torch.int16, PAD_TO_RADIX), (torch.int32, RADIX_MIN - 1), (torch.int64, 20000)):

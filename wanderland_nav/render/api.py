@@ -80,14 +80,16 @@ def rasterization(
     tiles waste fewer pixel-Gaussian evaluations, and gsplat's 16 on GPUs. Options that would
     change results and are not implemented here (sparse/abs grads, distributed, unscented/eval3d,
     lens distortion coefficients) raise instead of being silently ignored. `compiled=True` runs the
-    packed projection's EWA stage through torch.compile (`compiled.py`; eager fallback with one warning).
+    covariances, the packed projection's EWA stage and the forward composite's chunks through
+    torch.compile (`compiled.py`; eager fallback with one warning).
     """
     _check_options(packed=packed, compiled=compiled, render_mode=render_mode, rasterize_mode=rasterize_mode,
                    camera_model=camera_model, sparse_grad=sparse_grad, absgrad=absgrad, distributed=distributed,
                    with_ut=with_ut, with_eval3d=with_eval3d, radial_coeffs=radial_coeffs,
                    tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs)
     batch, C, covars, per_camera, viewmats, Ks, tile_size = _normalise_inputs(
-        means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width, height, tile_size)
+        means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width, height, tile_size,
+        compiled)
     B = math.prod(batch)
     flat = lambda t: t.reshape((B,) + t.shape[len(batch):]) if t is not None else None  # noqa: E731  [B, ...]
     opts = dict(width=int(width), height=int(height), near_plane=near_plane, far_plane=far_plane,
@@ -125,11 +127,16 @@ def _check_options(*, packed, compiled, render_mode, rasterize_mode, camera_mode
 
 
 def _normalise_inputs(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
-                      height, tile_size):
+                      height, tile_size, compiled=False):
     """Validate shapes, build covars [..., N, 3, 3] if needed, cast cameras to the means' dtype and pick
     the device's default tile size; -> (batch, C, covars, per_camera, viewmats [..., C, 4, 4], Ks [..., C, 3, 3], tile_size)."""
     batch, _, C, covars, per_camera = _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
                                                     backgrounds, sh_degree, width, height)
+    if covars is None:
+        covariances = quat_scale_to_covar
+        if compiled:
+            from .compiled import covariances_compiled as covariances
+        covars = covariances(quats, scales)
     dtype = means.dtype
     viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
     if tile_size is None:
@@ -140,7 +147,7 @@ def _normalise_inputs(means, quats, scales, opacities, colors, viewmats, Ks, cov
 
 def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars, backgrounds, sh_degree, width,
                   height):
-    """Validate gsplat's shapes with leading batch dims; -> (batch, N, C, covars [..., N, 3, 3], per_camera)."""
+    """Validate gsplat's shapes with leading batch dims; -> (batch, N, C, covars [..., N, 3, 3] or None, per_camera)."""
     batch = tuple(means.shape[:-2])
     _check(means.dim() >= 2 and means.shape[-1] == 3, f"means must be [..., N, 3], got {tuple(means.shape)}")
     _check(viewmats.dim() == len(batch) + 3 and tuple(viewmats.shape[:-3]) == batch and viewmats.shape[-2:] == (4, 4),
@@ -149,10 +156,9 @@ def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, covars,
     N, C = means.shape[-2], viewmats.shape[-3]
     _check(opacities.shape == batch + (N,), f"opacities must be [..., N]={list(batch + (N,))}, got {tuple(opacities.shape)}")
     _check(Ks.shape == batch + (C, 3, 3), f"Ks must be [..., C, 3, 3]={list(batch + (C, 3, 3))}, got {tuple(Ks.shape)}")
-    if covars is None:
+    if covars is None:  # built by the caller (`_normalise_inputs`)
         _check(quats is not None and quats.shape == batch + (N, 4), f"quats must be [..., N, 4], got {getattr(quats, 'shape', None)}")
         _check(scales is not None and scales.shape == batch + (N, 3), f"scales must be [..., N, 3], got {getattr(scales, 'shape', None)}")
-        covars = quat_scale_to_covar(quats, scales)
     else:
         _check(covars.shape == batch + (N, 3, 3), f"covars must be [..., N, 3, 3], got {tuple(covars.shape)}")
     if sh_degree is None:
@@ -209,8 +215,9 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     """Fast path for B scenes x C cameras (means [B,N,3], viewmats [B,C,4,4]): packed projection of the
     shared Gaussians, colours for the visible pairs only, one binning and composite for all B*C cameras."""
     B, C, N = viewmats.shape[0], viewmats.shape[1], means.shape[1]
-    project = project_packed
+    project, fused = project_packed, None
     if compiled:
+        from .compiled import fused_forward as fused
         from .compiled import project_packed_compiled as project
     cam, gid, proj = project(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
                                     near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
@@ -228,7 +235,7 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
     render_colors, render_alphas = rasterize_packed(
         cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, B * C, width, height,
-        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule)
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, fused=fused)
     meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=cam % C,
                  gaussian_ids=gid % N, batch_ids=torch.div(cam, C, rounding_mode="floor"), radii=proj.radii,
                  means2d=proj.means2d, depths=proj.depths, conics=proj.conics, opacities=opac,

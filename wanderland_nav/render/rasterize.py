@@ -34,167 +34,13 @@ import math
 import numpy as np
 import torch
 
+from .binning import isect_packed, isect_tiles, stable_sort  # noqa: F401  (stable_sort: re-exported)
+
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.999
 T_EPS = 1e-4
-CACHE_BLOCK = 1 << 15  # entries per block of the elementwise tile test (its temporaries fit in L2)
 DEFAULT_CHUNK_ELEMS = 1 << 17  # floats per [pixels, tiles, gaussians] temporary (512 KiB in float32: about L2)
 
-
-# --------------------------------------------------------------------------------------------
-# Tile intersection
-# --------------------------------------------------------------------------------------------
-def _sortable_int(x: torch.Tensor) -> torch.Tensor:
-    """Map floats to integers with the same order (IEEE bit trick), for an exact radix sort."""
-    if x.dtype == torch.float64:
-        b = x.contiguous().view(torch.int64)
-        return torch.where(b < 0, b ^ 0x7FFFFFFFFFFFFFFF, b)
-    b = x.to(torch.float32).contiguous().view(torch.int32)  # int32 keys sort ~1.5x faster than int64 on CPU
-    return torch.where(b < 0, b ^ 0x7FFFFFFF, b)
-
-
-RADIX_MIN = 1 << 15  # torch's CPU sort switches to a radix sort from this many elements on (torch 2.13)
-PAD_TO_RADIX = 1 << 13  # integer keys from this many elements on are padded up to RADIX_MIN
-
-
-def stable_sort(keys: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """`torch.sort(keys, stable=True)` for 1-D integer keys, padded to the radix-sort size on CPU.
-
-    Why: below 2^15 elements torch's CPU sort is a comparison sort (~70 ns per key), from 2^15 on a
-    radix sort (~13 ns per int32 key): measured 1.9 ms for 27k int32 keys vs 0.42 ms for 32,768, 1
-    thread. The env's per-group binning sorts 10^4-3*10^4 keys, so sorting them padded with the
-    dtype's largest value (stable: pads land after every real key) is ~4x cheaper; same result."""
-    n = keys.numel()
-    if keys.device.type != "cpu" or not PAD_TO_RADIX <= n < RADIX_MIN or keys.is_floating_point():
-        return torch.sort(keys, stable=True)
-    padded = torch.cat([keys, keys.new_full((RADIX_MIN - n,), torch.iinfo(keys.dtype).max)])
-    values, indices = torch.sort(padded, stable=True)
-    return values[:n], indices[:n]
-
-
-def isect_tiles(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, tile_size: int,
-                tile_width: int, tile_height: int):
-    """Sorted (tile, depth) intersection lists for all cameras.
-
-    means2d [C,N,2], radii [C,N,2] int (0 = culled), depths [C,N].
-    Returns vis [V] (flat c*N+n ids of visible Gaussians), ent [M] (indices into vis, grouped by
-    tile id c*TH*TW + ty*TW + tx, depth-ascending within a tile), counts [C*TH*TW] (int64).
-    Tile coverage is gsplat's: [floor((x - r)/ts), ceil((x + r)/ts)) clamped to the grid.
-    """
-    C, N = depths.shape
-    with torch.no_grad():
-        vis = ((radii > 0).all(-1)).reshape(-1).nonzero().squeeze(1)  # [V]
-        ent, counts = isect_packed(torch.div(vis, N, rounding_mode="floor"), means2d.reshape(-1, 2).index_select(0, vis),
-                                   radii.reshape(-1, 2).index_select(0, vis), depths.reshape(-1).index_select(0, vis),
-                                   C, tile_size, tile_width, tile_height)
-    return vis, ent, counts
-
-
-def isect_packed(cam: torch.Tensor, means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, C: int,
-                 tile_size: int, tile_width: int, tile_height: int, conics: torch.Tensor | None = None,
-                 opacities: torch.Tensor | None = None):
-    """Tile lists of V visible (camera, Gaussian) pairs: cam [V] camera ids, means2d [V,2], radii [V,2] > 0,
-    depths [V]. Returns ent [M] (indices into the V pairs, grouped by tile id c*TH*TW + ty*TW + tx,
-    depth-ascending within a tile) and counts [C*TH*TW] (int64).
-
-    With conics [V,3] and opacities [V], (pair, tile) entries whose alpha is below 1/255 at every
-    pixel centre of the tile are dropped (`_touches_tile`): they are skipped by the composite anyway,
-    so the image and gradients are unchanged, but they are a third of the box-test entries at the
-    env's operating point and cost sorting and compositing work."""
-    dev = depths.device
-    num_tiles = C * tile_height * tile_width
-    V = depths.numel()
-    with torch.no_grad():
-        if V == 0:
-            return torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(num_tiles, dtype=torch.long, device=dev)
-        m = means2d.detach()
-        r = radii.to(m.dtype)
-        x0 = torch.floor((m[:, 0] - r[:, 0]) / tile_size).clamp_(0, tile_width).long()
-        x1 = torch.ceil((m[:, 0] + r[:, 0]) / tile_size).clamp_(0, tile_width).long()
-        y0 = torch.floor((m[:, 1] - r[:, 1]) / tile_size).clamp_(0, tile_height).long()
-        y1 = torch.ceil((m[:, 1] + r[:, 1]) / tile_size).clamp_(0, tile_height).long()
-        wx = (x1 - x0).clamp_(min=0)
-        cnt = wx * (y1 - y0).clamp_(min=0)  # [V] tiles per Gaussian
-        # Visit Gaussians in depth order (exact: integer radix sort of the float bits, stable on ties),
-        # expand each into its covered tiles, then a *stable* sort by tile id (a small integer key)
-        # keeps depth order inside every tile. Two cheap radix sorts instead of one on wide keys.
-        order = stable_sort(_sortable_int(depths.detach()))[1]
-        cnt_o = cnt.index_select(0, order)
-        first_tile = ((cam.long() * tile_height + y0) * tile_width + x0).index_select(0, order)  # [V] depth order
-        rows = None
-        if conics is not None:
-            rows = _tile_test_rows(m, x0, y0, conics, opacities, tile_size).index_select(1, order)  # [8, V]
-        tile, src = _expand_to_tiles(cnt_o, wx.index_select(0, order), first_tile, rows, tile_width, tile_size)
-        # narrower keys: the stable sort of all tile entries is the binning's largest cost
-        key_dtype = torch.int16 if num_tiles < 2**15 else torch.int32 if num_tiles < 2**31 else torch.int64
-        tile = tile.to(key_dtype)
-        tile, perm = stable_sort(tile)
-        ent = order.index_select(0, src.index_select(0, perm))
-        counts = torch.bincount(tile.to(torch.int32), minlength=num_tiles)
-    return ent, counts
-
-
-def _expand_to_tiles(cnt: torch.Tensor, wx: torch.Tensor, first_tile: torch.Tensor, rows: torch.Tensor | None,
-                     tile_width: int, tile_size: int):
-    """(tile ids [M], pair slots [M]) of every (pair, tile) entry, pairs in the given (depth) order.
-
-    cnt [V] tiles of each pair's box, wx [V] its width in tiles, first_tile [V] its top-left tile id;
-    rows [8, V] (`_tile_test_rows`) or None: with them, entries that fail `_touches_tile` are dropped.
-    Works in blocks of about CACHE_BLOCK entries (whole pairs) so every [block] temporary stays in L2;
-    nothing of size M but the two outputs is ever allocated.
-    """
-    dev = cnt.device
-    ends = torch.cumsum(cnt, 0)
-    M = int(ends[-1]) if len(ends) else 0
-    if M == 0:
-        return torch.zeros(0, dtype=torch.long, device=dev), torch.zeros(0, dtype=torch.long, device=dev)
-    cuts = torch.searchsorted(ends, torch.arange(CACHE_BLOCK, max(M, CACHE_BLOCK), CACHE_BLOCK, device=dev), right=True)
-    bounds = [0] + sorted(set(cuts.tolist()) - {0, len(cnt)}) + [len(cnt)]
-    tiles, slots = [], []
-    for g0, g1 in zip(bounds[:-1], bounds[1:]):
-        c = cnt[g0:g1]
-        local = torch.repeat_interleave(torch.arange(g1 - g0, device=dev), c)  # [Mb] pair within the block
-        k = torch.arange(local.numel(), device=dev) - (torch.cumsum(c, 0) - c).index_select(0, local)
-        w = wx[g0:g1].index_select(0, local)
-        dy = torch.div(k, w, rounding_mode="floor")
-        dx = k - dy * w  # tile offsets inside the pair's box
-        if rows is not None:
-            hit = _touches_tile(rows[:, g0:g1].index_select(1, local), dx, dy, tile_size).nonzero().squeeze(1)
-            local, dx, dy = local.index_select(0, hit), dx.index_select(0, hit), dy.index_select(0, hit)
-        tiles.append(first_tile[g0:g1].index_select(0, local) + dy * tile_width + dx)
-        slots.append(local + g0)
-    return torch.cat(tiles), torch.cat(slots)
-
-
-def _tile_test_rows(means2d, x0, y0, conics, opacities, tile_size: int) -> torch.Tensor:
-    """Per-Gaussian constants of `_touches_tile`, [8, V] (contiguous rows): the first box tile's first pixel centre minus
-    the mean (ox, oy), a/2, c/2, b, -b/c, -b/a and log(255 o) + 1e-3 (a 1e-3 margin in log space, so
-    float rounding never drops an entry that the composite would keep)."""
-    a, b, c = conics.detach().unbind(1)
-    ox = x0.to(a.dtype) * tile_size + 0.5 - means2d[:, 0]
-    oy = y0.to(a.dtype) * tile_size + 0.5 - means2d[:, 1]
-    return torch.stack([ox, oy, 0.5 * a, 0.5 * c, b, -b / c, -b / a,
-                        torch.log(opacities.detach() * 255.0) + 1e-3], 0)
-
-
-def _touches_tile(rows: torch.Tensor, dx: torch.Tensor, dy: torch.Tensor, tile_size: int) -> torch.Tensor:
-    """[M] bool: may the Gaussian reach alpha >= 1/255 at some pixel centre of its box tile (dx, dy)?
-
-    rows [8, M] from `_tile_test_rows`. Exact minimum of sigma(d) = 0.5 (a dx^2 + c dy^2) + b dx dy
-    over the rectangle spanned by the tile's pixel centres (d = pixel - mean): for a positive definite
-    quadratic whose minimum (d = 0) lies outside the box, the box minimum lies on the edge x = ex or
-    y = ey, with (ex, ey) the point of the box's x and y ranges nearest 0 (at the optimum of an edge
-    x = const the x-derivative has the sign of x); alpha >= 1/255 needs sigma <= log(255 o).
-    """
-    ox, oy, ha, hc, b, nb_c, nb_a, limit = rows.unbind(0)
-    X0, Y0 = ox + dx * tile_size, oy + dy * tile_size
-    X1, Y1 = X0 + (tile_size - 1), Y0 + (tile_size - 1)
-    ex = torch.maximum(X0, X1.clamp(max=0.0))
-    ey = torch.maximum(Y0, Y1.clamp(max=0.0))
-    sigma = lambda u, v: ha * u * u + hc * v * v + b * u * v  # noqa: E731
-    on_x = sigma(ex, torch.minimum(torch.maximum(nb_c * ex, Y0), Y1))  # best point of the edge x = ex
-    on_y = sigma(torch.minimum(torch.maximum(nb_a * ey, X0), X1), ey)  # best point of the edge y = ey
-    return torch.minimum(on_x, on_y) <= limit
 
 # --------------------------------------------------------------------------------------------
 # Chunk kernels (shared by forward and backward). Layout: pixels first, [P, Ta, L], so that the
@@ -368,8 +214,8 @@ class _Cursor:
     GPU (`compact=False`): fixed chunk length and masks only, so the loop issues no host syncs.
     """
 
-    def __init__(self, plan: _Plan, tiles_h: np.ndarray, device, compact: bool):
-        self.plan, self.compact = plan, compact
+    def __init__(self, plan: _Plan, tiles_h: np.ndarray, device, compact: bool, chunk_len: int | None = None):
+        self.plan, self.compact, self.chunk_len = plan, compact, chunk_len  # chunk_len: fixed L (compiled kernel)
         self.counts_h = plan.counts[tiles_h]
         self.max_count = int(self.counts_h.max())
         self.starts = torch.as_tensor(plan.starts[tiles_h], device=device)
@@ -388,7 +234,9 @@ class _Cursor:
 
     def next_chunk(self):
         """(L, j [Ta, L] entry positions clamped into range, valid [Ta, L])."""
-        if self.compact:
+        if self.chunk_len:
+            L = self.chunk_len
+        elif self.compact:
             cap = max(self.plan.min_chunk, self.plan.chunk_elems // (self.active * self.plan.pixels))
             L = max(1, min(int(self.counts_h.max()) - self.consumed, cap))
         else:
@@ -475,41 +323,54 @@ def _pair_tables(table: torch.Tensor):
     return q_part, cols
 
 
+def _forward_tiles(plan: _Plan, geo: _Tiles, q_tab: torch.Tensor, col_tab: torch.Tensor, ent_pad: torch.Tensor,
+                   compact: bool) -> torch.Tensor:
+    """The eager forward composite of every tile group: out [C*TH*TW, P, D+1] (`_pair_tables`' q_tab, col_tab;
+    ent_pad [M+1] the tile lists with the sentinel pair appended)."""
+    out = torch.zeros(geo.C * geo.TH * geo.TW, geo.P, col_tab.shape[1], dtype=q_tab.dtype, device=q_tab.device)
+    for tiles_h in plan.groups:
+        tiles = torch.as_tensor(tiles_h, device=q_tab.device)
+        T = geo.in_image(tiles).t().contiguous()  # [Ta, P]
+        acc = T.new_zeros(len(tiles_h), geo.P, col_tab.shape[1])  # [Ta, P, D+1]
+        cur = _Cursor(plan, tiles_h, q_tab.device, compact=compact)
+        composite_group(cur, geo, tiles, T, acc, out, q_tab, col_tab, ent_pad)
+    return out
+
+
+def composite_group(cur: _Cursor, geo: _Tiles, tiles, T, acc, out, q_tab, col_tab, ent_pad) -> None:
+    """Run a tile group's remaining chunks (cursor `cur`) eagerly and write its tiles into out [NT, P, D+1].
+    tiles [Ta] the active tile ids, T [Ta, P] their transmittance, acc [Ta, P, D+1] what they have so far."""
+    pad = ent_pad.numel() - 1  # list position of the sentinel pair
+    th = _alpha_threshold(q_tab.dtype)
+    center = geo.centers(tiles)
+    while cur.more():
+        L, j, valid = cur.next_chunk()
+        e = ent_pad.index_select(0, torch.where(valid, j, pad).view(-1))
+        q = _chunk_coefs(q_tab.index_select(1, e).view(6, cur.active, L), center)
+        cols = col_tab.index_select(0, e).view(cur.active, L, -1)
+        contrib, T = forward_chunk(q, cols, T, geo.coords, geo.coords2, geo.uv, th, cur.compact)
+        acc += contrib
+        kept, gone = cur.advance(L, (T > 0).any(1))
+        if kept is not None:
+            out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
+            tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(0, kept)
+    if cur.active:
+        out.index_copy_(0, tiles, acc)
+
+
 class _RasterizeFn(torch.autograd.Function):
     """acc [C,H,W,D+1] = sum_j w_j [c_j, 1] from visible-Gaussian rows; see module docstring."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact):
+    def forward(ctx, means2d, conics, opacities, colors, ent, counts, C, H, W, tile_size, chunk_elems, compact, fused):
         # means2d [V,2], conics [V,3], opacities [V], colors [V,D] (visible Gaussians only)
         dtype, dev = means2d.dtype, means2d.device
-        D = colors.shape[1]
         geo = _Tiles(C, H, W, tile_size, dtype, dev)
         plan = _Plan(counts, geo.P, chunk_elems)
         q_tab, col_tab = _pair_tables(_table(means2d, conics, opacities, colors))
-        pad = ent.numel()  # list position of the sentinel pair
-        ent_pad = torch.cat([ent, ent.new_full((1,), means2d.shape[0])])
-        th = _alpha_threshold(dtype)
-        out = torch.zeros(C * geo.TH * geo.TW, geo.P, D + 1, dtype=dtype, device=dev)
-        on_cpu = compact
-        for tiles_h in plan.groups:
-            tiles = torch.as_tensor(tiles_h, device=dev)
-            center = geo.centers(tiles)
-            T = geo.in_image(tiles).t().contiguous()  # [Ta, P]
-            acc = torch.zeros(len(tiles_h), geo.P, D + 1, dtype=dtype, device=dev)  # [Ta, P, D+1]
-            cur = _Cursor(plan, tiles_h, dev, compact=on_cpu)
-            while cur.more():
-                L, j, valid = cur.next_chunk()
-                e = ent_pad.index_select(0, torch.where(valid, j, pad).view(-1))
-                q = _chunk_coefs(q_tab.index_select(1, e).view(6, cur.active, L), center)
-                cols = col_tab.index_select(0, e).view(cur.active, L, D + 1)
-                contrib, T = forward_chunk(q, cols, T, geo.coords, geo.coords2, geo.uv, th, on_cpu)
-                acc += contrib
-                kept, gone = cur.advance(L, (T > 0).any(1))
-                if kept is not None:
-                    out.index_copy_(0, tiles.index_select(0, gone), acc.index_select(0, gone))
-                    tiles, center, acc, T = tiles[kept], center[kept], acc[kept], T.index_select(0, kept)
-            if cur.active:
-                out.index_copy_(0, tiles, acc)
+        ent_pad = torch.cat([ent, ent.new_full((1,), means2d.shape[0])])  # position ent.numel(): the sentinel
+        composite = _forward_tiles if fused is None else fused  # fused: `compiled.fused_forward`
+        out = composite(plan, geo, q_tab, col_tab, ent_pad, compact)
         img = geo.to_image(out)
         ctx.save_for_backward(means2d, conics, opacities, colors, ent, counts, img)
         ctx.cfg = (C, H, W, tile_size, chunk_elems, compact)
@@ -583,7 +444,7 @@ class _RasterizeFn(torch.autograd.Function):
         o_safe = opacities.clamp_min(torch.finfo(dtype).tiny)
         g_rows = g_rows.t()
         return (g_rows[:, 0:2], g_rows[:, 2:5], g_rows[:, 5] / o_safe, g_rows[:, 6:6 + D],
-                None, None, None, None, None, None, None, None, None)
+                None, None, None, None, None, None, None, None, None, None)
 
 
 def rasterize_to_pixels(
@@ -628,19 +489,23 @@ def rasterize_packed(
     tile_size: int = 16,
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     schedule: str = "auto",
+    fused=None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair)."""
+    """`rasterize_to_pixels` for gsplat's packed layout (one row per visible camera-Gaussian pair).
+    fused: a drop-in for the eager forward composite `_forward_tiles` (`compiled.fused_forward`); the
+    backward stays the eager recomputing one."""
     TW, TH = -(-width // tile_size), -(-height // tile_size)
     ent, counts = isect_packed(camera_ids, means2d, radii, depths, C, tile_size, TW, TH, conics, opacities)
     return _composite(means2d, conics, opacities, colors.to(means2d.dtype), ent, counts, C, width, height,
-                      tile_size, chunk_elems, schedule)
+                      tile_size, chunk_elems, schedule, fused)
 
 
-def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule):
+def _composite(means2d, conics, opacities, colors, ent, counts, C, width, height, tile_size, chunk_elems, schedule,
+               fused=None):
     if schedule not in ("auto", "compact", "masked"):
         raise ValueError(f"schedule must be 'auto', 'compact' or 'masked', got {schedule!r}")
     compact = means2d.device.type == "cpu" if schedule == "auto" else schedule == "compact"
     D = colors.shape[-1]
     acc = _RasterizeFn.apply(means2d, conics, opacities, colors, ent, counts, C, height, width, tile_size,
-                             chunk_elems, compact)
+                             chunk_elems, compact, fused)
     return acc[..., :D], acc[..., D:]
