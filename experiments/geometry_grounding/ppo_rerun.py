@@ -95,6 +95,10 @@ def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list
     from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
 
     s = ex.c.study
+    seeds = [sd for sd in seeds if all((root / "eval_routes" / w / f"{env}_seed{sd}.json").is_file()
+                                       for w in worlds for env in envs)]  # whole seeds only
+    if not seeds:
+        return "no seed has every new-PPO evaluation on the mapped routes yet"
     cells = list(ex.cells.values())
     records = dict(eval_records(manifest, cells, ex.digests)["grounded_routes"])
     for env in envs:
