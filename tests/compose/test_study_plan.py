@@ -279,3 +279,24 @@ def test_chart_and_side_by_side_recording(tmp_path):
     assert (tmp_path / "m.rrd").stat().st_size > 1000
     with pytest.raises(ValueError, match="no estimates"):
         write_study_chart(tmp_path / "x.png", {"SR": {}, "IR": {}})
+
+
+def test_episode_sampler_gives_every_run_its_environment_episodes_file(tmp_path, monkeypatch):
+    """With `study.episode_sampler` each run of an env uses that env's generated file (`episodes.path`, its count
+    as it is); without, the composed recipe is exactly the one studies composed before the key existed."""
+    from omegaconf import OmegaConf
+
+    from wanderland_nav.compose.study_cells import StudyCells
+
+    c = _config(tmp_path)
+    plain = StudyCells(c, tmp_path, None, plan_cells(c.study))
+    before = OmegaConf.to_container(plain.train_config("holes", 0), resolve=True)
+    assert plain.study_episodes_file("holes") is None and before["episodes"]["path"] is None
+    wide = dataclasses.replace(c, study=dataclasses.replace(c.study, episode_sampler={"camera_radius": 12.0}))
+    ex = StudyCells(wide, tmp_path, None, plan_cells(wide.study))
+    monkeypatch.setattr(ex, "study_episodes_file", lambda env: tmp_path / f"episodes_{env}.json")
+    now = OmegaConf.to_container(ex.train_config("holes", 0), resolve=True)
+    assert now["episodes"]["path"] == str(tmp_path / "episodes_holes.json") and now["episodes"]["num"] is None
+    for conf in (before, now):
+        del conf["episodes"]["path"], conf["episodes"]["num"]
+    assert now == before
