@@ -49,7 +49,9 @@ def run(cfg: DictConfig) -> dict[str, Path]:
               f"{s.eval_episodes or 'all'} episodes | {time.perf_counter() - t0:.0f}s this invocation\n"
               f"recipe (train overrides): {' '.join(s.train)}"
               + (f"\naccepted recipe changes since cells ran: {list(s.accept_recipe_changes)}"
-                 if s.accept_recipe_changes else ""))
+                 if s.accept_recipe_changes else "")
+              + (f"\nepisodes of every environment generated with sampler overrides {dict(s.episode_sampler)}"
+                 if s.episode_sampler else ""))
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 

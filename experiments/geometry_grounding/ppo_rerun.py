@@ -13,6 +13,10 @@ GROUNDED environment on the same 60 test episodes and seed as the study's Table-
 (`<ppo-out>/eval/<env>_seed<s>.json`). Both steps resume. It prints the Table-3 analogue: per
 environment BC (the study's cell), BC+RL with the study's old PPO (its cell) and with the new PPO, paired
 over the same episodes and seeds, and the new BC+RL of each world against the new grounded BC+RL.
+
+With `--routes-in drift scale_1.2 ...` the new BC+RL policies are also evaluated on the grounded test routes
+mapped into those degraded worlds (the study's Fig.-8 protocol) and `misranking.txt` holds the study's
+misranking test with them (`<env> BC+RL tracked`): in place of the old PPO's BC+RL, and beside them.
 """
 
 from __future__ import annotations
@@ -33,9 +37,10 @@ from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan
 from wanderland_nav.rl.report import seed_table
 
 
+TRACKED = "BC+RL tracked"  # the phase label of the new (tracked-target) PPO's policies in the misranking grid
+
+
 def _train_and_eval(ex: StudyCells, env: str, seed: int, root: Path) -> Path:
-    from wanderland_nav.compose.build import load_navmesh
-    from wanderland_nav.compose.comparison import compare_checkpoints
     from wanderland_nav.train import run as train_run
 
     result = root / "eval" / f"{env}_seed{seed}.json"
@@ -44,16 +49,77 @@ def _train_and_eval(ex: StudyCells, env: str, seed: int, root: Path) -> Path:
     bc = ex.cell_dir(f"train/{env}/seed{seed}") / "checkpoints" / "bc.pt"
     run_dir = root / "train" / f"{env}_seed{seed}"
     train_run(ex.train_config(env, seed, run_dir=run_dir, more=[f"init_checkpoint={bc}"]))
-    s = ex.c.study
     scene, episodes, _ = ex.env_episodes(GROUNDED, seed)
-    n = s.eval_episodes
-    _, results, _ = compare_checkpoints([run_dir / "checkpoints" / "last.pt"], scene, episodes, load_navmesh(scene),
-                                        split=s.eval_split, num_episodes=n, batch_size=min(s.eval_batch_size, n),
-                                        device=ex.c.device, seed=seed)
-    res = next(iter(results.values()))
+    res = _evaluate(ex, run_dir / "checkpoints" / "last.pt", scene, episodes, ex.c.study.eval_episodes, seed)
     atomic_write_json(result, {"env": env, "seed": seed, "init_checkpoint": str(bc), "records": res.records,
                                "summary": res.summary})
     return result
+
+
+def _evaluate(ex: StudyCells, ckpt: Path, scene, episodes: Path, n: int, seed: int):
+    """One checkpoint on the first `n` episodes of the study's eval split (the study's eval cells' call)."""
+    from wanderland_nav.compose.build import load_navmesh
+    from wanderland_nav.compose.comparison import compare_checkpoints
+
+    s = ex.c.study
+    _, results, _ = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
+                                        num_episodes=n, batch_size=min(s.eval_batch_size, n), device=ex.c.device,
+                                        seed=seed)
+    return next(iter(results.values()))
+
+
+def _eval_routes(ex: StudyCells, env: str, seed: int, world: str, root: Path) -> Path:
+    """The new-PPO BC+RL trained in `env` on the grounded test routes mapped into degraded `world`: the
+    study's Fig.-8 protocol with the routes file its own cells use (`<ppo-out>/eval_routes/<world>/`)."""
+    from wanderland_nav.compose.study_routes import grounded_routes_file
+
+    result = root / "eval_routes" / world / f"{env}_seed{seed}.json"
+    if result.is_file():
+        return result
+    s = ex.c.study
+    scene = ex.env_episodes(world, seed)[0]
+    episodes, routes = grounded_routes_file(ex.env_episodes(GROUNDED, seed)[1], s.eval_split, s.eval_episodes, scene,
+                                            ex.out / "routes")
+    ckpt = root / "train" / f"{env}_seed{seed}" / "checkpoints" / "last.pt"
+    records = _evaluate(ex, ckpt, scene, episodes, routes["kept"], seed).records if routes["kept"] else []
+    atomic_write_json(result, {"env": env, "seed": seed, "world": world, "checkpoint": str(ckpt), "records": records,
+                               "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}})
+    return result
+
+
+def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list[str], seeds: list[int],
+               root: Path) -> str:
+    """The study's misranking test (same routes, Kendall tau-b per seed and mean of seeds) with the new-PPO
+    policies (`<env> BC+RL tracked`): once in place of the old PPO's BC+RL, once beside them."""
+    from wanderland_nav.compose.study_cells import eval_records
+    from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
+
+    s = ex.c.study
+    seeds = [sd for sd in seeds if all((root / "eval_routes" / w / f"{env}_seed{sd}.json").is_file()
+                                       for w in worlds for env in envs)]  # whole seeds only
+    if not seeds:
+        return "no seed has every new-PPO evaluation on the mapped routes yet"
+    cells = list(ex.cells.values())
+    records = dict(eval_records(manifest, cells, ex.digests)["grounded_routes"])
+    for env in envs:
+        for seed in seeds:
+            for world in [GROUNDED, *worlds]:
+                p = root / ("eval" if world == GROUNDED else f"eval_routes/{world}") / f"{env}_seed{seed}.json"
+                if p.is_file():
+                    records[world, seed, env, TRACKED] = json.loads(p.read_text())["records"]
+    routes = {c.env: manifest.entries[c.key]["info"]["routes"] for c in cells
+              if c.protocol == "grounded_routes" and manifest.status(c.key, ex.digests[c.key]) == "done"}
+    fixed = [(GROUNDED, ph) for ph in s.fixed_policies]
+    old = [(e, "BC+RL") for e in envs[1:]]
+    new = [(e, TRACKED) for e in envs]
+    out = []
+    for title, pols in (("the old PPO's BC+RL policies REPLACED by the tracked PPO's",
+                         [p for p in fixed if p[1] != "BC+RL"] + new),
+                        ("both PPOs' BC+RL policies", fixed + old + new)):
+        text, _, _ = fig8_same_routes(records, [GROUNDED, *worlds], pols, seeds, routes, metric=s.rank_metric,
+                                      resamples=s.bootstrap_resamples)
+        out.append(f"[misranking test with {title}; {len(pols)} policies, seeds {seeds}]\n{text}")
+    return "\n\n".join(out)
 
 
 def _records(manifest: Manifest, key: str):
@@ -83,6 +149,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ppo-out", type=Path, required=True)
     ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--routes-in", nargs="*", default=[], metavar="WORLD",
+                    help="degraded worlds whose mapped grounded routes the new-PPO policies are evaluated on, for "
+                         "the misranking test (misranking.txt)")
     args, overrides = ap.parse_known_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout)
     c = study_config(compose_config("study", [o for o in overrides if o != "--"]))
@@ -97,6 +166,14 @@ def main() -> int:
     text = tables(ex, manifest, envs, list(c.study.seeds), args.ppo_out)
     atomic_write_text(args.ppo_out / "table.txt", text + "\n")
     print(text)
+    if args.routes_in:
+        for seed in ([] if args.report_only else c.study.seeds):
+            for world in args.routes_in:
+                for env in envs:
+                    _eval_routes(ex, env, seed, world, args.ppo_out)
+        text = misranking(ex, manifest, envs, args.routes_in, list(c.study.seeds), args.ppo_out)
+        atomic_write_text(args.ppo_out / "misranking.txt", text + "\n")
+        print(text)
     return 0
 
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, plan_cells, run_cells
+from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, cell_inputs, plan_cells, run_cells
 from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
                                               unpaired_difference)
 
@@ -56,7 +56,11 @@ def test_plan_has_every_cell_once_and_needs_come_first(tmp_path):
                                           (dict(fixed_policies=["BC", "PPO"]), "PPO"),
                                           (dict(protocols=["own", "same"]), "same"),
                                           (dict(ranking_seeds=[7]), "not a subset"),
-                                          (dict(trained_presets=["drift"]), "not a subset")])
+                                          (dict(trained_presets=["drift"]), "not a subset"),
+                                          (dict(episode_sampler={"camera_radiuz": 12.0}),
+                                           r"study\.episode_sampler=.*camera_radiuz"),
+                                          (dict(episode_sampler={"camera_radius": -1.0}),
+                                           r"study\.episode_sampler=.*camera_radius=-1")])
 def test_plan_rejects_bad_grids(tmp_path, study, match):
     with pytest.raises(ValueError, match=match):
         plan_cells(_config(tmp_path, **study).study)
@@ -76,6 +80,13 @@ def test_digests_follow_what_a_cell_depends_on(tmp_path):
     moved = cell_digests(reseeded, plan_cells(reseeded.study))
     assert "build/holes/seed5" in moved and moved["train/holes/seed0"] != base["train/holes/seed0"]
     assert moved["train/grounded/seed0"] == base["train/grounded/seed0"]
+    # study.episode_sampler: every env's episodes change, so trainings and evaluations re-run, builds do not;
+    # left empty it is absent from the inputs, so the cells of studies made before it existed keep their hashes
+    assert "episode_sampler" not in cell_inputs(c, plan_cells(c.study)[-1])
+    wide = dataclasses.replace(c, study=dataclasses.replace(c.study, episode_sampler={"camera_radius": 12.0}))
+    sampled = cell_digests(wide, plan_cells(wide.study))
+    assert sampled["build/holes/seed0"] == base["build/holes/seed0"]
+    assert all(sampled[k] != base[k] for k in ("init/grounded/seed0", "train/holes/seed0", own, routes))
 
 
 def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
@@ -268,3 +279,24 @@ def test_chart_and_side_by_side_recording(tmp_path):
     assert (tmp_path / "m.rrd").stat().st_size > 1000
     with pytest.raises(ValueError, match="no estimates"):
         write_study_chart(tmp_path / "x.png", {"SR": {}, "IR": {}})
+
+
+def test_episode_sampler_gives_every_run_its_environment_episodes_file(tmp_path, monkeypatch):
+    """With `study.episode_sampler` each run of an env uses that env's generated file (`episodes.path`, its count
+    as it is); without, the composed recipe is exactly the one studies composed before the key existed."""
+    from omegaconf import OmegaConf
+
+    from wanderland_nav.compose.study_cells import StudyCells
+
+    c = _config(tmp_path)
+    plain = StudyCells(c, tmp_path, None, plan_cells(c.study))
+    before = OmegaConf.to_container(plain.train_config("holes", 0), resolve=True)
+    assert plain.study_episodes_file("holes") is None and before["episodes"]["path"] is None
+    wide = dataclasses.replace(c, study=dataclasses.replace(c.study, episode_sampler={"camera_radius": 12.0}))
+    ex = StudyCells(wide, tmp_path, None, plan_cells(wide.study))
+    monkeypatch.setattr(ex, "study_episodes_file", lambda env: tmp_path / f"episodes_{env}.json")
+    now = OmegaConf.to_container(ex.train_config("holes", 0), resolve=True)
+    assert now["episodes"]["path"] == str(tmp_path / "episodes_holes.json") and now["episodes"]["num"] is None
+    for conf in (before, now):
+        del conf["episodes"]["path"], conf["episodes"]["num"]
+    assert now == before

@@ -7,6 +7,7 @@ import shutil
 
 import numpy as np
 import pytest
+import torch
 
 from wanderland_nav.degrade import DegradeSpec, build_degraded_scene, preset
 from wanderland_nav.scene import load_scene
@@ -59,3 +60,29 @@ def test_holes_on_lidar_only_remove_returns_and_splats_are_not_applicable(kitti_
     with pytest.raises(ValueError, match="not applicable to a LiDAR-only scene"):
         build_degraded_scene(kitti_two_scans, tmp_path / "splats", preset("splat_mesh"))
     assert not (tmp_path / "splats").exists()
+
+
+def test_a_lidar_splat_is_rebuilt_from_the_degraded_scans_with_the_world(kitti_two_scans, tmp_path):
+    """Scale: the splat of the scaled world is the grounded splat scaled (means, sizes; settings in the meta);
+    drift: rebuilt from the moved scans, so the camera sees the same misregistration as the collision mesh."""
+    from wanderland_nav.render import Gaussians
+    from wanderland_nav.scene.lidar_splat import LidarSplatSettings, write_lidar_splat
+
+    src = tmp_path / "src"
+    shutil.copytree(kitti_two_scans, src)
+    st = LidarSplatSettings(voxel=0.5, crop_radius=10.0)
+    figs = write_lidar_splat(src, st)
+    g0 = Gaussians.load(src / "3dgs.ply")
+    assert len(g0) == figs["gaussians"] > 1000
+    s = 1.2
+    big = build_degraded_scene(src, tmp_path / "big", DegradeSpec("big", scale=s))
+    g1 = Gaussians.load(big / "3dgs.ply")
+    assert len(g1) == len(g0)
+    voxel = lambda g, v: np.lexsort(np.floor(g.means.numpy() / v).T[::-1])  # noqa: E731  (a centroid is in its voxel)
+    np.testing.assert_allclose(g1.means.numpy()[voxel(g1, 0.5 * s)] / s, g0.means.numpy()[voxel(g0, 0.5)], atol=2e-3)
+    np.testing.assert_allclose(np.median(g1.scales.numpy()), s * np.median(g0.scales.numpy()), rtol=1e-3)
+    meta = json.loads((big / "scene_meta.json").read_text())["lidar_splat"]
+    assert meta["settings"]["voxel"] == pytest.approx(0.5 * s) and meta["figures"]["gaussians"] == len(g1)
+    spec = DegradeSpec("drift", drift_m_at_100m=3.0, drift_deg_at_100m=5.0, pose_noise_m=0.05, seed=3)
+    g2 = Gaussians.load(build_degraded_scene(src, tmp_path / "drift", spec) / "3dgs.ply")
+    assert len(g2) > 1000 and not (len(g2) == len(g0) and torch.equal(g2.means, g0.means))

@@ -59,6 +59,7 @@ class StudyCells:
         self.digests = cell_digests(c, cells)
         self.cells = {cell.key: cell for cell in cells}
         self._envs: dict[tuple[str, int], tuple] = {}
+        self._study_episodes: dict[str, Path] = {}
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
@@ -76,13 +77,47 @@ class StudyCells:
         cell = self.cells[key]
         return self.out / "cells" / cell.kind / cell.folder_name(self.digests[key])
 
-    def train_config(self, env: str, seed: int, run_dir: Path | None = None, more: Sequence[str] = ()):
-        """`train`'s composed config for `env`: the study's recipe overrides + scene, seed, folder (+ `more`)."""
+    def train_config(self, env: str, seed: int, run_dir: Path | None = None, more: Sequence[str] = (), *,
+                     study_episodes: bool = True):
+        """`train`'s composed config for `env`: the study's recipe overrides + scene, seed, folder (+ `more`),
+        and `episodes.path` when `study.episode_sampler` makes the env's episodes (`study_episodes_file`)."""
         extra = [f"scene={self.env_path(env)}", f"seed={seed}", f"device={self.c.device}",
                  f"exp_name=study_{self.c.study.name}_{env}", "progress=false", *more]
+        own = self.study_episodes_file(env) if study_episodes else None
+        extra += [f"episodes.path={own}", "episodes.num=null"] if own is not None else []
         extra += [f"threads={self.c.threads}"] if self.c.threads else []
         extra += [f"run_dir={run_dir}"] if run_dir is not None else []
         return _compose_inside_hydra("train", [*self.c.study.train, *extra])
+
+    def study_episodes_file(self, env: str) -> Path | None:
+        """With `study.episode_sampler`: `env`'s episodes generated on its own navmesh with those sampler
+        settings and the recipe's `episodes.num/seed/splits` (`episodes_study_<hash8>.json` in its folder;
+        a rerun reuses it by the generator's args hash); None without (the recipe's own file, as before)."""
+        overrides = dict(self.c.study.episode_sampler)
+        if not overrides:
+            return None
+        if env not in self._study_episodes:
+            import hashlib
+
+            from planners import NavMesh
+            from wanderland_nav.compose.scene import prepared_scene
+            from wanderland_nav.compose.schema import TrainConfig, typed_config
+            from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+            from wanderland_nav.episodes.sampler import SamplerSettings
+
+            t = typed_config(self.train_config(env, 0, study_episodes=False), TrainConfig)
+            scene = prepared_scene(t.scene, t.navigation)
+            settings = GeneratorSettings(sampler=SamplerSettings(**overrides), splits=tuple(t.episodes.splits),
+                                         goal_images=t.episodes.goal_images)
+            tag = hashlib.sha256(json.dumps([settings.to_dict(), t.episodes.num, t.episodes.seed],
+                                            sort_keys=True).encode()).hexdigest()[:8]
+            _, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
+                                              Path(scene.root) / f"episodes_study_{tag}.json",
+                                              num_episodes=t.episodes.num, seed=t.episodes.seed, settings=settings)
+            log.info("%s episodes (study.episode_sampler %s): %s, %d kept %s", env, overrides, summary.out,
+                     summary.kept, summary.splits)
+            self._study_episodes[env] = Path(summary.out)
+        return self._study_episodes[env]
 
     def env_episodes(self, env: str, seed: int):
         """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them.
@@ -99,6 +134,9 @@ class StudyCells:
 
         t = typed_config(self.train_config(env, seed), TrainConfig)
         scene = prepared_scene(t.scene, t.navigation)
+        if t.episodes.path is not None:  # study.episode_sampler's file, used as it is (as `train` does)
+            scene.episodes_path = Path(t.episodes.path)
+            return scene, Path(t.episodes.path), t
         own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
         path = episodes_for_run(scene, Path(own), num=t.episodes.num, seed=t.episodes.seed,
                                 splits=tuple(t.episodes.splits), goal_images=t.episodes.goal_images)

@@ -54,6 +54,9 @@ class StudyGroup:
     # env.camera.render_chunk; any other difference refuses the study (`StudyCells.check_trained_recipes`)
     accept_recipe_changes: List[str] = field(default_factory=list)
     retry_failed: bool = False  # a failed cell (e.g. a navmesh too broken for episodes) is re-run on restart
+    # `episodes.sampler.SamplerSettings` overrides for every environment's episodes (e.g. camera_radius on a LiDAR
+    # street whose capture path is a few metres long); {}: the recipe's own episodes file, as `train` makes it
+    episode_sampler: Dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass

@@ -80,6 +80,13 @@ def _check_grid(s: StudyGroup) -> None:
         raise ValueError(f"study.protocols: {s.protocols} not among {', '.join(PROTOCOLS)}")
     if s.trained_presets is not None and not set(s.trained_presets) <= set(s.presets):
         raise ValueError(f"study.trained_presets={s.trained_presets}: not a subset of study.presets={s.presets}")
+    if s.episode_sampler:
+        from wanderland_nav.episodes.sampler import SamplerSettings
+
+        try:
+            SamplerSettings(**s.episode_sampler)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"study.episode_sampler={dict(s.episode_sampler)}: {e}") from None
     if s.ranking_seeds is not None and not set(s.ranking_seeds) <= set(s.seeds):
         raise ValueError(f"study.ranking_seeds={s.ranking_seeds}: not a subset of study.seeds={s.seeds}")
 
@@ -128,9 +135,11 @@ def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
         from wanderland_nav.degrade import preset
 
         return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
+    sampler = {"episode_sampler": dict(s.episode_sampler)} if s.episode_sampler else {}  # absent: old hashes hold
     if cell.kind in ("init", "train"):
-        return {"source": source, "train": list(s.train), "device": c.device}
-    own = {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train)}
+        return {"source": source, "train": list(s.train), "device": c.device, **sampler}
+    own = {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train),
+           **sampler}
     return own if cell.protocol == "own" else {**own, "protocol": cell.protocol}
 
 

@@ -24,6 +24,7 @@ write is never replaced.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -35,6 +36,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
+from wanderland_nav.scene.lidar_splat import META_KEY as LIDAR_SPLAT
 
 from .damage import fragment_mask, hole_mask, horizontal_xy
 from .lidar_only import write_lidar_only
@@ -148,6 +150,12 @@ def _meta(src: Path, scene, spec: DegradeSpec, figures: dict) -> dict:
     gen = meta.pop("generator", None)
     if "lidar_min_range" in meta:  # sensor-frame metres: the scans are scaled with the world
         meta["lidar_min_range"] = float(meta["lidar_min_range"]) * s
+    if LIDAR_SPLAT in meta:  # rebuilt from the degraded scans (lidar_only.py) with its metric settings scaled
+        from wanderland_nav.scene.lidar_splat import LidarSplatSettings
+
+        settings = dataclasses.asdict(LidarSplatSettings(**meta[LIDAR_SPLAT]["settings"]).scaled(s))
+        meta[LIDAR_SPLAT] = {**meta[LIDAR_SPLAT], "settings": settings, "figures": {
+            k[len("splat_"):]: v for k, v in figures.items() if k.startswith("splat_")}}
     return {**meta, "name": f"{scene.name}__{spec.name}", "up_axis": scene.up_axis, "indoor_regions": regions,
             "degradation": {"spec": spec.as_dict(), "source": str(src), "source_name": scene.name,
                             "source_generator": gen, "figures": figures}}

@@ -10,7 +10,11 @@ i.e. the new pose is `corr.apply_poses(T_i)` and the scan's own points are multi
 (a metric sensor seen through a non-metric trajectory), as is `lidar_min_range` in `scene_meta.json`
 (`build._meta`).
 Holes and dropped fragments are cut on the grounded world positions of all scans together and then
-removed from each scan. Splat-derived geometry needs a 3DGS and is refused: not applicable here.
+removed from each scan. A scene with a `lidar_splat` (`scene/lidar_splat.py`, its settings in
+`scene_meta.json`) gets its splat rebuilt from the degraded scans, so camera and collision geometry carry
+the same error. Splat-derived collision geometry is refused: a LiDAR splat's surfels ARE the LiDAR returns
+(fusing their rendered depth returns the LiDAR surface, not a video-3DGS's photometric one), and there are
+no camera poses to render it from (`splat_mesh`, `video3dgs`: not applicable).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.scene.lidar_splat import META_KEY
 
 from .damage import fragment_mask, hole_mask, horizontal_xy
 from .poses import PoseCorrection
@@ -44,7 +49,8 @@ def write_lidar_only(src: Path, dst: Path, scene, spec: DegradeSpec, corr: PoseC
 
     if spec.geometry == "splats":
         raise ValueError(f"{src}: preset {spec.name!r} is not applicable to a LiDAR-only scene: splat-derived "
-                         "collision geometry needs a 3D Gaussian splat (3dgs.ply) rendered from camera poses")
+                         "collision geometry needs a photometric 3D Gaussian splat rendered from camera poses "
+                         "(a lidar_splat's surfels are the LiDAR returns themselves)")
     files = lidar_scans(src)
     T = np.asarray(scene.lidar_poses, dtype=np.float64)  # [K,4,4] world_from_sensor
     scans = [read_kitti_bin(f) for f in files]  # [N_i,4] float32 x y z intensity, sensor frame
@@ -59,12 +65,28 @@ def write_lidar_only(src: Path, dst: Path, scene, spec: DegradeSpec, corr: PoseC
         out[:, :3] *= np.float32(corr.scale)
         with atomic_path(dst / "lidar" / f.name) as tmp:
             out.astype("<f4").tofile(tmp)
-    poses = corr.apply_poses(T)[:, :3, :].reshape(len(T), 12)
+    new_T = corr.apply_poses(T)
     with atomic_path(dst / "lidar" / "poses.txt") as tmp:
-        np.savetxt(tmp, poses, fmt="%.9e")
+        np.savetxt(tmp, new_T[:, :3, :].reshape(len(T), 12), fmt="%.9e")
+    splat = _rebuild_splat(scene, [s[k] * np.float32([corr.scale] * 3 + [1]) for s, k in zip(scans, keep)], new_T,
+                           corr.scale, dst) if META_KEY in scene.meta else {}
     for p in sorted(src.iterdir()):  # e.g. other metadata; prepared artefacts and plots are rebuilt / dropped
         if p.is_file() and p.name != "scene_meta.json" and p.suffix.lower() in (".json", ".txt", ".yaml") \
                 and not p.name.startswith(("collision_mesh", "navmesh", "episodes", ".")):
             shutil.copy2(p, dst / p.name)
     return {"points_in": int(len(world)), "points_kept": int(sum(k.sum() for k in keep)), "holes": n_holes,
-            "fragments_dropped": n_tiles, "lidar_points": int(len(world)), "scans": len(files)}
+            "fragments_dropped": n_tiles, "lidar_points": int(len(world)), "scans": len(files), **splat}
+
+
+def _rebuild_splat(scene, scans: list[np.ndarray], world_from_sensor: np.ndarray, scale: float, dst: Path) -> dict:
+    """The source's `lidar_splat` rebuilt from the degraded scans and poses with its settings scaled by the
+    world's scale, written to `dst/3dgs.ply`: the camera then sees exactly the misregistered geometry (drift's
+    ghost layers) and the metric error (scale) the collision mesh has. -> figures (prefixed `splat_`)."""
+    from wanderland_nav.scene.lidar_splat import LidarSplatSettings, splat_from_scans
+
+    block = scene.meta[META_KEY]
+    st = LidarSplatSettings(**block["settings"]).scaled(scale)
+    min_range = float(block["figures"]["min_range_m"]) * scale
+    g, figures = splat_from_scans(scans, world_from_sensor, min_range, st)
+    g.save(dst / "3dgs.ply")
+    return {f"splat_{k}": v for k, v in figures.items()}
