@@ -155,12 +155,12 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     else:
         assert ck["phase"] == "bc_done"
     table = (tmp_path / "run" / "table.txt").read_text()
-    # title, header, the rows and their sampled twins (eval.sampled_rows: BC, BC+RL), the paired rows (BC - untrained;
-    # with RL also BC+RL - BC, BC+RL sampled - BC sampled, BC+RL sampled - BC), 2 legend lines
-    assert table.count("\n") == (2 + 5 + 4 + 2 if rl else 2 + 3 + 1 + 2)
+    # the rows, one paired row per phase (BC - untrained; with RL also BC+RL - BC), title, header, legend; the
+    # sampled twins are off by default (eval.sampled_rows; tests/rl/test_sampled_rows.py)
+    assert table.count("\n") == 3 + 2 * len(rows) + rl
     assert re.search(r"^BC - untrained +paired", table, re.M) and "[95% interval] over 2 episodes" in table
     assert bool(re.search(r"^BC\+RL - BC +paired", table, re.M)) == rl
-    assert bool(re.search(r"^BC\+RL sampled - BC +paired", table, re.M)) == rl
+    assert " sampled" not in table
     assert (tmp_path / "run" / "curves.png").read_bytes()[:4] == b"\x89PNG"
     # a second start finds everything done: no retraining, same table
     assert run(cfg) == rows

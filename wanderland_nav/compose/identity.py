@@ -77,19 +77,20 @@ def run_identity(config: dict, scene: dict) -> dict:
     return {"hash": _digest({"config": cfg, "scene": scene})[:16], "config": cfg, "scene": scene}
 
 
-def _flatten(d, prefix="") -> dict:
+def flatten_dotted(d, prefix="") -> dict:
+    """Nested dicts -> one level of dotted keys (`{"a": {"b": 1}}` -> `{"a.b": 1}`), to diff configs key by key."""
     if not isinstance(d, dict):
         return {prefix.rstrip("."): d}
     out = {}
     for k, v in d.items():
-        out.update(_flatten(v, f"{prefix}{k}."))
+        out.update(flatten_dotted(v, f"{prefix}{k}."))
     return out
 
 
 def identity_diff(old: dict, new: dict, limit: int = 8) -> list[str]:
     """Human-readable differences `key: old -> new` between two identities."""
-    a = _flatten({"config": old.get("config", {}), "scene": old.get("scene", {})})
-    b = _flatten({"config": new.get("config", {}), "scene": new.get("scene", {})})
+    a = flatten_dotted({"config": old.get("config", {}), "scene": old.get("scene", {})})
+    b = flatten_dotted({"config": new.get("config", {}), "scene": new.get("scene", {})})
     diffs = [f"{k}: {a.get(k, '<absent>')!r} -> {b.get(k, '<absent>')!r}" for k in sorted(set(a) | set(b))
              if a.get(k) != b.get(k)]
     return diffs[:limit] + ([f"... and {len(diffs) - limit} more"] if len(diffs) > limit else [])

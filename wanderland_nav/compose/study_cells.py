@@ -150,7 +150,7 @@ class StudyCells:
         `study.accept_recipe_changes` names the keys a user has checked do not matter (listed in the table)."""
         import yaml
 
-        from wanderland_nav.compose.identity import _flatten, identity_config
+        from wanderland_nav.compose.identity import flatten_dotted, identity_config
 
         own = ("scene", "seed", "threads")
         accepted = tuple(self.c.study.accept_recipe_changes)
@@ -160,7 +160,7 @@ class StudyCells:
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
             now = OmegaConf.to_container(self.train_config(cell.env, cell.seed, run_dir=folder), resolve=True)
-            old, new = (_flatten({k: v for k, v in identity_config(x).items() if k not in own}) for x in (recorded, now))
+            old, new = (flatten_dotted({k: v for k, v in identity_config(x).items() if k not in own}) for x in (recorded, now))
             diff = [f"{k}: {old.get(k, '<absent>')!r} -> {new.get(k, '<absent>')!r}" for k in sorted(set(old) | set(new))
                     if old.get(k) != new.get(k) and not k.startswith(accepted)]
             if diff:
