@@ -87,12 +87,17 @@ def flatten_dotted(d, prefix="") -> dict:
     return out
 
 
+def dotted_diff(old: dict, new: dict, skip: tuple[str, ...] = ()) -> list[str]:
+    """`key: old -> new` for every dotted key whose value differs between two nested dicts, sorted; keys
+    starting with a prefix in `skip` are left out."""
+    a, b = flatten_dotted(old), flatten_dotted(new)
+    return [f"{k}: {a.get(k, '<absent>')!r} -> {b.get(k, '<absent>')!r}" for k in sorted(set(a) | set(b))
+            if a.get(k) != b.get(k) and not (skip and k.startswith(skip))]
+
+
 def identity_diff(old: dict, new: dict, limit: int = 8) -> list[str]:
     """Human-readable differences `key: old -> new` between two identities."""
-    a = flatten_dotted({"config": old.get("config", {}), "scene": old.get("scene", {})})
-    b = flatten_dotted({"config": new.get("config", {}), "scene": new.get("scene", {})})
-    diffs = [f"{k}: {a.get(k, '<absent>')!r} -> {b.get(k, '<absent>')!r}" for k in sorted(set(a) | set(b))
-             if a.get(k) != b.get(k)]
+    diffs = dotted_diff(*({"config": x.get("config", {}), "scene": x.get("scene", {})} for x in (old, new)))
     return diffs[:limit] + ([f"... and {len(diffs) - limit} more"] if len(diffs) > limit else [])
 
 

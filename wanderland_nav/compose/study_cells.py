@@ -150,7 +150,7 @@ class StudyCells:
         `study.accept_recipe_changes` names the keys a user has checked do not matter (listed in the table)."""
         import yaml
 
-        from wanderland_nav.compose.identity import flatten_dotted, identity_config
+        from wanderland_nav.compose.identity import dotted_diff, identity_config
 
         own = ("scene", "seed", "threads")
         accepted = tuple(self.c.study.accept_recipe_changes)
@@ -160,9 +160,8 @@ class StudyCells:
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
             now = OmegaConf.to_container(self.train_config(cell.env, cell.seed, run_dir=folder), resolve=True)
-            old, new = (flatten_dotted({k: v for k, v in identity_config(x).items() if k not in own}) for x in (recorded, now))
-            diff = [f"{k}: {old.get(k, '<absent>')!r} -> {new.get(k, '<absent>')!r}" for k in sorted(set(old) | set(new))
-                    if old.get(k) != new.get(k) and not k.startswith(accepted)]
+            old, new = ({k: v for k, v in identity_config(x).items() if k not in own} for x in (recorded, now))
+            diff = dotted_diff(old, new, skip=accepted)
             if diff:
                 raise RuntimeError(f"{folder}: cell {key} was trained with another recipe than study.train composes "
                                    "now:\n  " + "\n  ".join(diff) + "\nstart the study in a new out= folder (a cell's "
