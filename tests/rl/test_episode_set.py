@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 import shutil
 
 import pytest
@@ -61,3 +62,5 @@ def test_ppo_routes_add_train_only_routes_and_keep_the_evaluation_episodes(demo_
     for split in ("val", "test"):  # the extra file adds no evaluation episode
         assert [e.episode_id for e in make([own, extra], split).args[1]] == [e.episode_id for e in
                                                                                load_episodes(own, split=split)]
+    with pytest.raises(ValueError, match=f"^{re.escape(str(extra))}: no episodes in split 'val'"):  # a path, not a list
+        make([extra], "val")

@@ -51,18 +51,19 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
 
     split = split if split is not None else env_cfg.split
     paths = [Path(episodes_path)] if isinstance(episodes_path, (str, Path)) else [Path(p) for p in episodes_path]
+    where = " + ".join(str(p) for p in paths)  # the file(s) an error names
     episodes = load_episodes(paths[0], split=split)
     for more in paths[1:]:  # extra route files (PPO's ppo_routes): their ids are prefixed to stay unique
         episodes += [dataclasses.replace(e, episode_id=f"{more.stem}/{e.episode_id}")
                      for e in load_episodes(more, split=split)]
     if not episodes:
-        raise ValueError(f"{episodes_path}: no episodes in split {split!r}")
+        raise ValueError(f"{where}: no episodes in split {split!r}")
     goal_images = None
     if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
         from wanderland_nav.envs.episode_table import load_goal_images
 
         goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, Path(scene.root)], env_cfg.camera.height,
-                                       env_cfg.camera.width, where=str(episodes_path))
+                                       env_cfg.camera.width, where=where)
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
                    batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)
 
