@@ -59,7 +59,7 @@ class StudyCells:
         self.digests = cell_digests(c, cells)
         self.cells = {cell.key: cell for cell in cells}
         self._envs: dict[tuple[str, int], tuple] = {}
-        self._study_episodes: dict[str, Path] = {}
+        self._study_episodes: dict[str, tuple[Path, int]] = {}  # env -> (study episodes file, episodes asked)
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
@@ -116,8 +116,22 @@ class StudyCells:
                                               num_episodes=t.episodes.num, seed=t.episodes.seed, settings=settings)
             log.info("%s episodes (study.episode_sampler %s): %s, %d kept %s", env, overrides, summary.out,
                      summary.kept, summary.splits)
-            self._study_episodes[env] = Path(summary.out)
-        return self._study_episodes[env]
+            self._study_episodes[env] = (Path(summary.out), t.episodes.num)
+        return self._study_episodes[env][0]
+
+    def episodes_asked(self, env: str, recipe_num: int | None) -> int | None:
+        """How many episodes `env`'s file was generated for: the recipe's `episodes.num`, or with
+        `study.episode_sampler` the number its own file was asked for (the recipe then says null)."""
+        return recipe_num if recipe_num is not None else self._study_episodes.get(env, (None, None))[1]
+
+    def cell_train_config(self, cell: Cell, folder: Path):
+        """The composed `train` config a train or ppo cell runs: the study's recipe, and for a ppo cell
+        `study.ppo_stage` from its train cell's BC checkpoint (which switches `train`'s BC phase off)."""
+        more = []
+        if cell.kind == "ppo":
+            bc = self.cell_dir(cell.needs[0]) / CHECKPOINTS["BC"]
+            more = [*self.c.study.ppo_stage, f"init_checkpoint={bc}"]
+        return self.train_config(cell.env, cell.seed, run_dir=folder, more=more)
 
     def env_episodes(self, env: str, seed: int):
         """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them.
@@ -156,10 +170,10 @@ class StudyCells:
         accepted = tuple(self.c.study.accept_recipe_changes)
         for key, cell in self.cells.items():
             folder = self.cell_dir(key)
-            if cell.kind != "train" or manifest.status(key, self.digests[key]) != "done":
+            if cell.kind not in ("train", "ppo") or manifest.status(key, self.digests[key]) != "done":
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
-            now = OmegaConf.to_container(self.train_config(cell.env, cell.seed, run_dir=folder), resolve=True)
+            now = OmegaConf.to_container(self.cell_train_config(cell, folder), resolve=True)
             old, new = ({k: v for k, v in identity_config(x).items() if k not in own} for x in (recorded, now))
             diff = dotted_diff(old, new, skip=accepted)
             if diff:
@@ -194,20 +208,27 @@ class StudyCells:
         return {"checkpoint": str(folder / CHECKPOINTS["untrained"])}
 
     def _train(self, cell: Cell, folder: Path) -> dict:
+        """One `train` run in the cell's env: BC then PPO (a train cell), or PPO alone from the train cell's
+        BC checkpoint (a ppo cell, `study.ppo_stage`)."""
         from wanderland_nav.compose.episode_file import split_counts
+        from wanderland_nav.compose.schema import TrainConfig, typed_config
 
         _, episodes, t = self.env_episodes(cell.env, cell.seed)  # made here so a too-broken navmesh fails clearly
         counts = split_counts(episodes)
+        asked = self.episodes_asked(cell.env, t.episodes.num)
         if counts.get("train", 0) < 1 or counts.get(self.c.study.eval_split, 0) < 1:
-            raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {t.episodes.num}); "
+            raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {asked}); "
                                "too few to train and evaluate")
-        ppo = t.algo.ppo
+        cfg = self.cell_train_config(cell, folder)
+        ppo = typed_config(cfg, TrainConfig).algo.ppo
         # recorded beside the rows (a budget with no policy update is refused by PPOConfig before we get here)
         updates = ppo.num_iterations - ppo.critic_warmup_iters if ppo.enabled else 0
-        rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
-        return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
+        rows = self.train_fn(cfg)
+        return {"episodes_file": str(episodes), "episodes": counts, "asked": asked, "ppo_frames": ppo.total_frames,
                 "ppo_policy_updates": updates,
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
+
+    _ppo = _train
 
     def _eval(self, cell: Cell, folder: Path) -> dict:
         from wanderland_nav.compose.build import load_navmesh
