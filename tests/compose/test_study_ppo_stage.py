@@ -143,3 +143,17 @@ def test_table3_keeps_whole_seeds_and_pairs_each_worlds_rl_gain():
     crossed[(GROUNDED, 1, GROUNDED, "BC")] = rec[(GROUNDED, 1, GROUNDED, "BC")]  # each seed lacks a row the other has
     assert "no seed of [1, 2] has every row" in table3(crossed, envs, [1, 2])
     assert "are not" not in table3(rec, envs, [0, 1])  # every seed whole: none named
+
+
+def test_a_copied_study_compares_its_own_paths_by_what_they_name():
+    """A study copied to another out= moves its sampler episodes files and the ppo cells' bc.pt: still the same
+    recipe. Another episodes file name (other generator settings) is not."""
+    from wanderland_nav.compose.study_cells import _portable
+
+    def cfg(out: str, name: str = "episodes_study_c7d8bd09.json") -> dict:
+        return {"scene": {"path": f"{out}/scenes/drift_s0"}, "seed": 1, "init_checkpoint": f"{out}/cells/bc.pt",
+                "episodes": {"path": f"{out}/scenes/drift_s0/{name}", "num": None}, "algo": {"ppo": {"lr": 5e-5}}}
+
+    assert _portable(cfg("/tmp/a")) == _portable(cfg("/tmp/b/out"))
+    assert _portable(cfg("/tmp/a")) != _portable(cfg("/tmp/a", "episodes_study_00000000.json"))
+    assert _portable({**cfg("/tmp/a"), "episodes": {"path": None, "num": 400}})["episodes"]["path"] is None

@@ -160,13 +160,13 @@ class StudyCells:
         """Refuse to reuse a done `train` cell whose recorded config (`config.yaml`, resolved) differs from
         what `study.train` composes now. A cell's hash covers the `study.train` overrides, not the config
         defaults and code they resolve against: after e.g. a PPO fix changes `conf/algo`, the same overrides
-        would otherwise reuse the old policies silently. Scene path, seed and threads are the cell's own;
-        `study.accept_recipe_changes` names the keys a user has checked do not matter (listed in the table)."""
+        would otherwise reuse the old policies silently. Paths inside the study are compared as the study's own
+        (`_portable`), so a copied study still matches; `study.accept_recipe_changes` names the keys a user has
+        checked do not matter (listed in the table)."""
         import yaml
 
-        from wanderland_nav.compose.identity import dotted_diff, identity_config
+        from wanderland_nav.compose.identity import dotted_diff
 
-        own = ("scene", "seed", "threads")
         accepted = tuple(self.c.study.accept_recipe_changes)
         for key, cell in self.cells.items():
             folder = self.cell_dir(key)
@@ -174,8 +174,7 @@ class StudyCells:
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
             now = OmegaConf.to_container(self.cell_train_config(cell, folder), resolve=True)
-            old, new = ({k: v for k, v in identity_config(x).items() if k not in own} for x in (recorded, now))
-            diff = dotted_diff(old, new, skip=accepted)
+            diff = dotted_diff(_portable(recorded), _portable(now), skip=accepted)
             if diff:
                 raise RuntimeError(f"{folder}: cell {key} was trained with another recipe than study.train composes "
                                    "now:\n  " + "\n  ".join(diff) + "\nstart the study in a new out= folder (a cell's "
@@ -266,6 +265,18 @@ class StudyCells:
 
     def needs_producer(self, cell: Cell) -> str:
         return cell.needs[0]  # study_plan._eval puts the policy's producer first
+
+
+def _portable(config: dict) -> dict:
+    """A train / ppo cell's identity config without what is the cell's own: scene path, seed, threads, the
+    ppo cell's init_checkpoint (its train cell's bc.pt, whose hash is in the ppo cell's) and the folder of a
+    `study.episode_sampler` episodes file (its name carries the generator's settings hash, kept)."""
+    from wanderland_nav.compose.identity import identity_config
+
+    out = {k: v for k, v in identity_config(config).items() if k not in ("scene", "seed", "threads", "init_checkpoint")}
+    if (out.get("episodes") or {}).get("path"):
+        out["episodes"] = {**out["episodes"], "path": Path(out["episodes"]["path"]).name}
+    return out
 
 
 def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
