@@ -1,7 +1,8 @@
 """The grounding study in one command: `python -m wanderland_nav.study +study=grounding [debug=smoke]`.
 
 Builds each degraded environment from the grounded scene (`wanderland_nav.degrade`), trains BC then PPO
-in every environment on its own episodes (each a `train` run), evaluates every policy in the grounded
+in every environment on its own episodes (each a `train` run; with `study.ppo_stage` PPO again as its own
+cell from that run's BC, e.g. `+study=grounding_recipe`: the learning recipe's budget), evaluates every policy in the grounded
 environment (Table-3 analogue) and the fixed grounded-trained policies in every environment (Fig.-8
 analogue), then writes `<out>/table.txt`, `fig8.png` and `meshes.rrd`. Each step is a cell of
 `compose/study_plan.py` with its own folder and hash; starting the same command again skips finished

@@ -1,12 +1,15 @@
-"""`python -m wanderland_nav.study +study=grounding debug=smoke` end to end, then resumed (slow: ~5 min on 2 cores)."""
+"""`python -m wanderland_nav.study +study=grounding debug=smoke` end to end, then resumed, then with a PPO stage
+(slow: ~6 min on 2 cores)."""
 
 from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 import torch
+import yaml
 
 pytestmark = pytest.mark.slow
 
@@ -54,3 +57,16 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
         new, old = (load_checkpoint(d / name)["policy"] for d in (cell / "checkpoints", tmp_path / "orig"))
         assert all(torch.equal(v, old[k]) for k, v in new.items()), name
     assert json.loads((cell / "bc_rounds_provenance.json").read_text())["bc_weights_equal"] is True
+
+    # study.ppo_stage: PPO again from each train cell's BC; train cells and BC evaluations are reused as they are
+    staged = run(compose_config("study", [*overrides, "+study.ppo_stage=['algo.ppo.lr=1.0e-4']"]))
+    after = json.loads((out / "done.json").read_text())
+    reused = [k for k in manifest if k.startswith("train/") or k.endswith(":BC")]
+    assert reused and all(after[k] == manifest[k] for k in reused)
+    ppo = [k for k in after if k.startswith("ppo/")]
+    assert len(ppo) == 3 and all(after[k]["status"] == "done" for k in ppo)  # grounded, scale_1.2, holes
+    assert all(after[k]["hash"] != manifest[k]["hash"] for k in manifest if k.endswith(":BC+RL"))
+    run_cfg = yaml.safe_load((Path(after["ppo/grounded/seed0"]["dir"]) / "config.yaml").read_text())
+    assert run_cfg["init_checkpoint"] == str(cell / "checkpoints" / "bc.pt") and run_cfg["algo"]["ppo"]["lr"] == 1.0e-4
+    assert "PPO stage from the train cell's BC in holes" in staged["table"].read_text()
+    assert "holes BC+RL - holes BC" in staged["table"].read_text()

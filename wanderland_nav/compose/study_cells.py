@@ -59,7 +59,7 @@ class StudyCells:
         self.digests = cell_digests(c, cells)
         self.cells = {cell.key: cell for cell in cells}
         self._envs: dict[tuple[str, int], tuple] = {}
-        self._study_episodes: dict[str, Path] = {}
+        self._study_episodes: dict[str, tuple[Path, int]] = {}  # env -> (study episodes file, episodes asked)
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
@@ -116,8 +116,22 @@ class StudyCells:
                                               num_episodes=t.episodes.num, seed=t.episodes.seed, settings=settings)
             log.info("%s episodes (study.episode_sampler %s): %s, %d kept %s", env, overrides, summary.out,
                      summary.kept, summary.splits)
-            self._study_episodes[env] = Path(summary.out)
-        return self._study_episodes[env]
+            self._study_episodes[env] = (Path(summary.out), t.episodes.num)
+        return self._study_episodes[env][0]
+
+    def episodes_asked(self, env: str, recipe_num: int | None) -> int | None:
+        """How many episodes `env`'s file was generated for: the recipe's `episodes.num`, or with
+        `study.episode_sampler` the number its own file was asked for (the recipe then says null)."""
+        return recipe_num if recipe_num is not None else self._study_episodes.get(env, (None, None))[1]
+
+    def cell_train_config(self, cell: Cell, folder: Path):
+        """The composed `train` config a train or ppo cell runs: the study's recipe, and for a ppo cell
+        `study.ppo_stage` from its train cell's BC checkpoint (which switches `train`'s BC phase off)."""
+        more = []
+        if cell.kind == "ppo":
+            bc = self.cell_dir(cell.needs[0]) / CHECKPOINTS["BC"]
+            more = [*self.c.study.ppo_stage, f"init_checkpoint={bc}"]
+        return self.train_config(cell.env, cell.seed, run_dir=folder, more=more)
 
     def env_episodes(self, env: str, seed: int):
         """(prepared scene, its episodes file, typed train config) exactly as `train` in `env` uses them.
@@ -146,22 +160,21 @@ class StudyCells:
         """Refuse to reuse a done `train` cell whose recorded config (`config.yaml`, resolved) differs from
         what `study.train` composes now. A cell's hash covers the `study.train` overrides, not the config
         defaults and code they resolve against: after e.g. a PPO fix changes `conf/algo`, the same overrides
-        would otherwise reuse the old policies silently. Scene path, seed and threads are the cell's own;
-        `study.accept_recipe_changes` names the keys a user has checked do not matter (listed in the table)."""
+        would otherwise reuse the old policies silently. Paths inside the study are compared as the study's own
+        (`_portable`), so a copied study still matches; `study.accept_recipe_changes` names the keys a user has
+        checked do not matter (listed in the table)."""
         import yaml
 
-        from wanderland_nav.compose.identity import dotted_diff, identity_config
+        from wanderland_nav.compose.identity import dotted_diff
 
-        own = ("scene", "seed", "threads")
         accepted = tuple(self.c.study.accept_recipe_changes)
         for key, cell in self.cells.items():
             folder = self.cell_dir(key)
-            if cell.kind != "train" or manifest.status(key, self.digests[key]) != "done":
+            if cell.kind not in ("train", "ppo") or manifest.status(key, self.digests[key]) != "done":
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
-            now = OmegaConf.to_container(self.train_config(cell.env, cell.seed, run_dir=folder), resolve=True)
-            old, new = ({k: v for k, v in identity_config(x).items() if k not in own} for x in (recorded, now))
-            diff = dotted_diff(old, new, skip=accepted)
+            now = OmegaConf.to_container(self.cell_train_config(cell, folder), resolve=True)
+            diff = dotted_diff(_portable(recorded), _portable(now), skip=accepted)
             if diff:
                 raise RuntimeError(f"{folder}: cell {key} was trained with another recipe than study.train composes "
                                    "now:\n  " + "\n  ".join(diff) + "\nstart the study in a new out= folder (a cell's "
@@ -194,20 +207,27 @@ class StudyCells:
         return {"checkpoint": str(folder / CHECKPOINTS["untrained"])}
 
     def _train(self, cell: Cell, folder: Path) -> dict:
+        """One `train` run in the cell's env: BC then PPO (a train cell), or PPO alone from the train cell's
+        BC checkpoint (a ppo cell, `study.ppo_stage`)."""
         from wanderland_nav.compose.episode_file import split_counts
+        from wanderland_nav.compose.schema import TrainConfig, typed_config
 
         _, episodes, t = self.env_episodes(cell.env, cell.seed)  # made here so a too-broken navmesh fails clearly
         counts = split_counts(episodes)
+        asked = self.episodes_asked(cell.env, t.episodes.num)
         if counts.get("train", 0) < 1 or counts.get(self.c.study.eval_split, 0) < 1:
-            raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {t.episodes.num}); "
+            raise RuntimeError(f"{episodes}: only {counts} episodes on this navmesh (asked for {asked}); "
                                "too few to train and evaluate")
-        ppo = t.algo.ppo
+        cfg = self.cell_train_config(cell, folder)
+        ppo = typed_config(cfg, TrainConfig).algo.ppo
         # recorded beside the rows (a budget with no policy update is refused by PPOConfig before we get here)
         updates = ppo.num_iterations - ppo.critic_warmup_iters if ppo.enabled else 0
-        rows = self.train_fn(self.train_config(cell.env, cell.seed, run_dir=folder))
-        return {"episodes_file": str(episodes), "episodes": counts, "asked": t.episodes.num,
+        rows = self.train_fn(cfg)
+        return {"episodes_file": str(episodes), "episodes": counts, "asked": asked, "ppo_frames": ppo.total_frames,
                 "ppo_policy_updates": updates,
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
+
+    _ppo = _train
 
     def _eval(self, cell: Cell, folder: Path) -> dict:
         from wanderland_nav.compose.build import load_navmesh
@@ -245,6 +265,18 @@ class StudyCells:
 
     def needs_producer(self, cell: Cell) -> str:
         return cell.needs[0]  # study_plan._eval puts the policy's producer first
+
+
+def _portable(config: dict) -> dict:
+    """A train / ppo cell's identity config without what is the cell's own: scene path, seed, threads, the
+    ppo cell's init_checkpoint (its train cell's bc.pt, whose hash is in the ppo cell's) and the folder of a
+    `study.episode_sampler` episodes file (its name carries the generator's settings hash, kept)."""
+    from wanderland_nav.compose.identity import identity_config
+
+    out = {k: v for k, v in identity_config(config).items() if k not in ("scene", "seed", "threads", "init_checkpoint")}
+    if (out.get("episodes") or {}).get("path"):
+        out["episodes"] = {**out["episodes"], "path": Path(out["episodes"]["path"]).name}
+    return out
 
 
 def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:

@@ -35,6 +35,11 @@ class StudyGroup:
     degrade_seed: int = 0  # the seed of the stochastic degradations (drift, holes): one degraded world per preset
     seeds: List[int] = field(default_factory=lambda: [0])  # training seeds (policy init, episodes order, PPO)
     train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])  # `train` overrides: the recipe sizes
+    # `train` overrides of a separate PPO stage (e.g. the learning recipe's PPO sizes): when set, every train cell
+    # gets a `ppo` cell = `train` with `train` + these + init_checkpoint=<the train cell's bc.pt>, and BC+RL is that
+    # cell's policy. The train cells (BC, and their own PPO, then unused) keep their hash, so a study re-runs only
+    # the PPO with a new budget and stays paired on the same BC policies; [] : BC+RL is the train cell's own PPO
+    ppo_stage: List[str] = field(default_factory=list)
     fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
     table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
     # Fig. 8 in a degraded env: "own" = its own test episodes; "grounded_routes" = the grounded test episodes

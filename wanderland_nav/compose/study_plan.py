@@ -2,8 +2,9 @@
 
 A cell is one unit of work with one folder: `build` (a degraded scene), `init` (the untrained policy of
 a seed, saved as a checkpoint so every evaluation loads policies the same way), `train` (one `train`
-run: BC then PPO in one environment) and `eval` (one policy evaluated on one environment's test
-split). Each cell's inputs are hashed together with the hashes of the cells it needs, so changing the
+run: BC then PPO in one environment), `ppo` (only with `study.ppo_stage`: PPO again from that train
+cell's BC checkpoint with another budget, and then the BC+RL policy) and `eval` (one policy evaluated on
+one environment's test split). Each cell's inputs are hashed together with the hashes of the cells it needs, so changing the
 recipe or a preset re-runs exactly the cells downstream of it; the folder name carries that hash
 (`cells/<kind>/<what>_seed<s>_<hash8>`), and a `train` folder additionally holds the run identity that
 `train` itself checks on resume.
@@ -38,7 +39,7 @@ MANIFEST = "done.json"
 
 @dataclass(frozen=True)
 class Cell:
-    kind: str  # build | init | train | eval
+    kind: str  # build | init | train | ppo | eval
     env: str  # the environment the cell works in: "grounded" or a degradation preset
     seed: int  # the training seed (the degradation seed for `build`)
     policy: tuple[str, str] | None = None  # eval: (environment trained in, phase: `is_policy_phase`)
@@ -57,15 +58,23 @@ class Cell:
         return f"{self.env}{pol}{routes}_seed{self.seed}_{digest[:8]}"
 
 
-def _producer(policy: tuple[str, str], seed: int) -> str:
-    """The key of the cell whose folder holds `policy`'s checkpoint."""
+def _producer(policy: tuple[str, str], seed: int, s: StudyGroup) -> str:
+    """The key of the cell whose folder holds `policy`'s checkpoint (BC+RL: the `ppo` cell with a PPO stage)."""
     env, phase = policy
-    return Cell("init", GROUNDED, seed).key if phase == "untrained" else Cell("train", env, seed).key
+    if phase == "untrained":
+        return Cell("init", GROUNDED, seed).key
+    return Cell("ppo" if phase == "BC+RL" and s.ppo_stage else "train", env, seed).key
 
 
-def _eval(env: str, seed: int, policy: tuple[str, str], degrade_seed: int, protocol: str = "own") -> Cell:
-    needs = (_producer(policy, seed),) + (() if env == GROUNDED else (Cell("build", env, degrade_seed).key,))
+def _eval(env: str, seed: int, policy: tuple[str, str], s: StudyGroup, protocol: str = "own") -> Cell:
+    needs = (_producer(policy, seed, s),) + (() if env == GROUNDED else (Cell("build", env, s.degrade_seed).key,))
     return Cell("eval", env, seed, policy, needs, protocol)
+
+
+def _training(env: str, seed: int, s: StudyGroup) -> list[Cell]:
+    """The train cell of `env` (after its scene's build) and, with `study.ppo_stage`, the ppo cell after it."""
+    train = Cell("train", env, seed, needs=() if env == GROUNDED else (Cell("build", env, s.degrade_seed).key,))
+    return [train] + ([Cell("ppo", env, seed, needs=(train.key,))] if s.ppo_stage else [])
 
 
 def _check_grid(s: StudyGroup) -> None:
@@ -93,7 +102,8 @@ def _check_grid(s: StudyGroup) -> None:
 
 def plan_cells(s: StudyGroup) -> list[Cell]:
     """Every cell in run order, most important first, so a study cut short has whole results:
-    builds; then per seed the untrained init, the grounded training and the fixed (grounded-trained)
+    builds; then per seed the untrained init, the grounded training (and its `ppo` cell with
+    `study.ppo_stage`; likewise after every training below) and the fixed (grounded-trained)
     policies in the grounded environment; then per degraded environment the fixed policies on the
     grounded routes mapped into it (its Fig.-8 column), its own training and that policy in the
     grounded environment (its Table-3 rows; only for `trained_presets`). Last, for `ranking_seeds`: every degraded-trained
@@ -104,26 +114,26 @@ def plan_cells(s: StudyGroup) -> list[Cell]:
     routes = "grounded_routes" in s.protocols
     trained = [p for p in s.presets if s.trained_presets is None or p in s.trained_presets]
     for seed in s.seeds:
-        cells += [Cell("init", GROUNDED, seed), Cell("train", GROUNDED, seed)]
-        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.fixed_policies]
-        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s.degrade_seed) for ph in s.table3_phases
+        cells += [Cell("init", GROUNDED, seed), *_training(GROUNDED, seed, s)]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s) for ph in s.fixed_policies]
+        cells += [_eval(GROUNDED, seed, (GROUNDED, ph), s) for ph in s.table3_phases
                   if ph not in s.fixed_policies]
         for env in s.presets:
-            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed, "grounded_routes")
+            cells += [_eval(env, seed, (GROUNDED, ph), s, "grounded_routes")
                       for ph in s.fixed_policies if routes]
             if env in trained:
-                cells.append(Cell("train", env, seed, needs=(Cell("build", env, s.degrade_seed).key,)))
-                cells += [_eval(GROUNDED, seed, (env, ph), s.degrade_seed) for ph in s.table3_phases]
+                cells += _training(env, seed, s)
+                cells += [_eval(GROUNDED, seed, (env, ph), s) for ph in s.table3_phases]
         if "untrained" not in s.fixed_policies:  # the Table-3 reference row
-            cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s.degrade_seed))
+            cells.append(_eval(GROUNDED, seed, (GROUNDED, "untrained"), s))
     for seed in (s.seeds if s.ranking_seeds is None else s.ranking_seeds):
         if routes:
-            cells += [_eval(env, seed, (t, ph), s.degrade_seed, "grounded_routes") for env in s.presets
+            cells += [_eval(env, seed, (t, ph), s, "grounded_routes") for env in s.presets
                       for t in trained for ph in s.ranked_phases]
-            cells += [_eval(GROUNDED, seed, (t, ph), s.degrade_seed) for t in trained
+            cells += [_eval(GROUNDED, seed, (t, ph), s) for t in trained
                       for ph in s.ranked_phases if ph not in s.table3_phases]
         if "own" in s.protocols:
-            cells += [_eval(env, seed, (GROUNDED, ph), s.degrade_seed) for env in s.presets for ph in s.fixed_policies]
+            cells += [_eval(env, seed, (GROUNDED, ph), s) for env in s.presets for ph in s.fixed_policies]
     return cells
 
 
@@ -138,6 +148,8 @@ def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
     sampler = {"episode_sampler": dict(s.episode_sampler)} if s.episode_sampler else {}  # absent: old hashes hold
     if cell.kind in ("init", "train"):
         return {"source": source, "train": list(s.train), "device": c.device, **sampler}
+    if cell.kind == "ppo":  # its train cell's digest is in its needs; the stage's own overrides here
+        return {"source": source, "train": list(s.train), "ppo_stage": list(s.ppo_stage), "device": c.device, **sampler}
     own = {"split": s.eval_split, "episodes": s.eval_episodes, "batch_size": s.eval_batch_size, "train": list(s.train),
            **sampler}
     return own if cell.protocol == "own" else {**own, "protocol": cell.protocol}

@@ -30,12 +30,22 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
         e = manifest.entries.get(c.key, {})
         if status[c.key] in ("failed", "blocked"):
             lines.append(f"  {status[c.key]}: {c.key}: {e.get('error') or 'needs ' + ', '.join(e.get('blocked_by', []))}")
-        if c.kind == "train" and status[c.key] == "done":
-            info = e["info"]
-            ppo = info.get("ppo_policy_updates")
-            lines.append(f"  episodes in {c.env} (seed {c.seed}): {info['episodes']} of {info['asked']} asked, "
-                         f"cell {e['seconds']:.0f}s (a resumed run counts its remainder)" + ("" if ppo is None else f", {ppo} PPO policy updates"))
+        if c.kind in ("train", "ppo") and status[c.key] == "done":
+            lines.append(_training_line(c, e))
     return lines
+
+
+def _training_line(c: Cell, e: dict) -> str:
+    """A done train / ppo cell: its environment's episodes, its time and its PPO budget."""
+    info = e["info"]
+    asked = info["asked"]  # None in train cells made with study.episode_sampler before it was recorded
+    ppo = info.get("ppo_policy_updates")
+    frames = f"{info['ppo_frames']} PPO frames, " if "ppo_frames" in info else ""
+    what = "PPO stage from the train cell's BC" if c.kind == "ppo" else "episodes"
+    return (f"  {what} in {c.env} (seed {c.seed}): {info['episodes']} "
+            + ("(study.episode_sampler's file)" if asked is None else f"of {asked} asked")
+            + f", cell {e['seconds']:.0f}s (a resumed run counts its remainder)"
+            + ("" if ppo is None else f", {frames}{ppo} PPO policy updates"))
 
 
 def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: Manifest, meshes: dict[str, Path],

@@ -78,17 +78,26 @@ def _runs(records: Mapping[tuple, list[dict]], env: str, policy: tuple[str, str]
 
 def table3(records: Mapping[tuple, list[dict]], envs: Sequence[str], seeds: Sequence[int]) -> str:
     """Every policy in the grounded env's test split; paired deltas vs the grounded-trained policy (BC+RL,
-    else BC) and vs untrained.
-    Rows appear for the (env, phase) pairs that were evaluated."""
+    else BC) and vs untrained, and each world's RL gain (`<env> BC+RL - <env> BC`).
+    Rows appear for the (env, phase) pairs that were evaluated, on the seeds that have every such row
+    (whole seeds, so every difference is paired); the seeds left out are named."""
     policies = [(GROUNDED, "untrained")] + [(e, ph) for e in envs for ph in ("BC", "BC+RL")]
-    runs = {policy_label(*p): r for p in policies if (r := _runs(records, GROUNDED, p, seeds))}
+    present = [p for p in policies if _runs(records, GROUNDED, p, seeds)]
+    whole = [sd for sd in seeds if all((GROUNDED, sd, *p) in records for p in present)]
+    runs = {policy_label(*p): r for p in present if (r := _runs(records, GROUNDED, p, whole))}
     if not runs:
-        return "Table 3: no policy was evaluated in the grounded environment yet"
-    parts = ["Table 3 analogue: trained in <env>, evaluated in the GROUNDED environment (its test split)"]
+        return ("Table 3: no policy was evaluated in the grounded environment yet" if not present else
+                f"Table 3: no seed of {list(seeds)} has every row ({[policy_label(*p) for p in present]}) yet")
+    parts = ["Table 3 analogue: trained in <env>, evaluated in the GROUNDED environment (its test split)"
+             + (f"; seeds {whole} (every row done; seeds {[sd for sd in seeds if sd not in whole]} are not)"
+                if len(whole) < len(seeds) else "")]
     trained = next((lab for ph in ("BC+RL", "BC") if (lab := policy_label(GROUNDED, ph)) in runs), None)
+    rl_gain = [(f"{e} BC+RL", f"{e} BC") for e in envs if f"{e} BC+RL" in runs and f"{e} BC" in runs]
     for base in (trained, "untrained"):  # the grounded-trained policy (its last phase evaluated), the random init
         if base in runs and len(runs) > 1:
-            parts += [f"-- paired differences vs {base}", seed_table(runs, baseline=base)]
+            parts += [f"-- paired differences vs {base}" + (", and each world's BC+RL - BC" if rl_gain else ""),
+                      seed_table(runs, baseline=base, pairs=rl_gain)]
+            rl_gain = []  # once
     if len(parts) == 1:
         parts.append(seed_table(runs))
     return "\n".join(parts)
