@@ -116,12 +116,13 @@ def test_progress_counters_and_terminations():
     assert st.steps_without_progress.tolist() == [0, 3, 3] and st.stuck_steps.tolist() == [0, 3, 0]
     radius = torch.full((3,), 1.0)
     nav = torch.ones(3, dtype=torch.bool)
-    s, i, t = terminations(torch.tensor([4.4, 5.0, 5.05]), radius, st, nav, torch.full((3,), 3), cfg)
+    s, i, t, _ = terminations(torch.tensor([4.4, 5.0, 5.05]), radius, st, nav, torch.full((3,), 3), cfg)
     assert s.tolist() == [False, False, False] and i.tolist() == [False, True, True] and not t.any()
     # success beats intervention; timeout only when neither; off-navmesh is an intervention
-    s, i, t = terminations(torch.tensor([0.5, 4.0, 4.0]), radius, st, torch.tensor([True, True, False]),
-                           torch.full((3,), 10), TerminationConfig(max_steps=10))
+    s, i, t, cause = terminations(torch.tensor([0.5, 4.0, 4.0]), radius, st, torch.tensor([True, True, False]),
+                                  torch.full((3,), 10), TerminationConfig(max_steps=10))
     assert s.tolist() == [True, False, False] and i.tolist() == [False, False, True] and t.tolist() == [False, True, False]
+    assert cause.tolist() == [0, 0, 1]  # off the navmesh; none for the success or the timeout
 
 
 def test_intervention_cause_names_the_rule_that_fired_with_off_navmesh_first():
@@ -132,8 +133,10 @@ def test_intervention_cause_names_the_rule_that_fired_with_off_navmesh_first():
     code = intervention_cause(st, nav, cfg)
     names = ["" if c == 0 else INTERVENTION_CAUSES[c - 1] for c in code.tolist()]
     assert names == ["", "no_progress", "stuck", "stuck", "off_navmesh"]
-    _, i, _ = terminations(torch.full((5,), 9.0), torch.ones(5), st, nav, torch.ones(5, dtype=torch.long), cfg)
-    assert i.tolist() == (code > 0).tolist()  # the same rule as the intervention flag
+    _, i, _, cause = terminations(torch.full((5,), 9.0), torch.ones(5), st, nav, torch.ones(5, dtype=torch.long), cfg)
+    assert i.tolist() == (code > 0).tolist() and cause.tolist() == code.tolist()  # the same rule as the flag
+    s, i, _, cause = terminations(torch.full((5,), 0.5), torch.ones(5), st, nav, torch.ones(5, dtype=torch.long), cfg)
+    assert s.all() and not i.any() and not cause.any()  # success at the goal is never an intervention
 
 
 def test_ir_by_cause_sums_to_ir():

@@ -227,7 +227,7 @@ class StudyCells:
                 "ppo_policy_updates": updates,
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
 
-    _ppo = _train
+    _ppo = _train  # dispatched by cell.kind: a ppo cell is a train run whose config (cell_train_config) starts at bc.pt
 
     def _eval(self, cell: Cell, folder: Path) -> dict:
         from wanderland_nav.compose.build import load_navmesh

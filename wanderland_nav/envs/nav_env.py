@@ -46,7 +46,7 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.metrics import EpisodeMetrics, spl
-from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, intervention_cause, navigation_reward,
+from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, navigation_reward,
                                          terminations, update_progress)
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
@@ -279,7 +279,7 @@ class NavEnv(EnvBase):
         d_now = self._step_distance(end)
         steps = self._steps + 1
         progress = update_progress(self._progress, d_now, collided, moved, cfg.termination)
-        success, intervention, truncated = terminations(
+        success, intervention, truncated, cause = terminations(
             d_now, self.table.goal_radius[self._ep], progress, navigable, steps, cfg.termination
         )
         reward = navigation_reward(self._dist, d_now, success, intervention, cfg.reward)
@@ -294,7 +294,6 @@ class NavEnv(EnvBase):
         terminated = success | intervention
         done = terminated | truncated
         if bool(done.any()):
-            cause = intervention_cause(progress, navigable, cfg.termination)  # [B]: which rule (IR by cause)
             self._record_finished(done.nonzero().flatten(), success, intervention, truncated, cause)
         out = self._observation()
         out.update(
@@ -380,7 +379,7 @@ class NavEnv(EnvBase):
                 "nonfinite_actions": self._nonfinite[idx],
                 "success": success[idx],
                 "intervention": intervention[idx],
-                "cause": torch.where(intervention[idx], cause[idx], 0),
+                "cause": cause[idx],  # 0 unless an intervention ended it
                 "timeout": truncated[idx],
                 "path_length": self._path_len[idx],
                 "shortest": self.shortest_length[ep],

@@ -62,16 +62,18 @@ def terminations(
     step_count: torch.Tensor,
     cfg: TerminationConfig,
 ):
-    """-> (success, intervention, truncated), `[B]` bool each, mutually exclusive.
+    """-> (success, intervention, truncated, cause): `[B]` bool each, mutually exclusive, and `[B]` long.
 
     success: within the goal radius (geodesic); intervention: stuck for `stuck_steps`, no
     progress for `no_progress_steps`, or off the navigable region; truncated: the step count
-    reached `max_steps` without either (timeout is not an intervention).
+    reached `max_steps` without either (timeout is not an intervention). cause: `intervention_cause`'s
+    code where `intervention`, else 0 (an episode record says which rule ended it: IR by cause).
     """
     success = d_now <= radius
-    intervention = (intervention_cause(state, navigable, cfg) > 0) & ~success
+    cause = torch.where(success, 0, intervention_cause(state, navigable, cfg))
+    intervention = cause > 0
     truncated = (step_count >= cfg.max_steps) & ~success & ~intervention
-    return success, intervention, truncated
+    return success, intervention, truncated, cause
 
 
 #: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
