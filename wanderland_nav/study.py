@@ -46,9 +46,11 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}
     s = c.study
+    # line 1 is also the chart's title: what the figure shows, not how long this invocation took
     header = (f"study {s.name} | source {execute.source().name} | seeds {list(s.seeds)} | eval split {s.eval_split}, "
-              f"{s.eval_episodes or 'all'} episodes | {time.perf_counter() - t0:.0f}s this invocation\n"
+              f"{s.eval_episodes or 'all'} episodes\n{time.perf_counter() - t0:.0f}s this invocation\n"
               f"recipe (train overrides): {' '.join(s.train)}"
+              + (f"\nPPO stage (its own cell from each train cell's BC): {' '.join(s.ppo_stage)}" if s.ppo_stage else "")
               + (f"\naccepted recipe changes since cells ran: {list(s.accept_recipe_changes)}"
                  if s.accept_recipe_changes else "")
               + (f"\nepisodes of every environment generated with sampler overrides {dict(s.episode_sampler)}"

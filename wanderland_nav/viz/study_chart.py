@@ -45,10 +45,12 @@ def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[
         ax.set_ylim(0, 1)
         ax.set_title(f"{m} (95 % CI)")
         ax.grid(axis="y", alpha=0.3)
-    axes[0][0].legend(fontsize=7, loc="upper right")
+    # below the axes, not over them: the bars reach 1.0 in every corner of an SR panel
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=min(len(labels), 5), frameon=False)
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06 * ((len(labels) + 4) // 5), 1, 1))
     out = Path(out)
     with atomic_path(out) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
