@@ -107,7 +107,7 @@ def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list
                 p = root / ("eval" if world == GROUNDED else f"eval_routes/{world}") / f"{env}_seed{seed}.json"
                 if p.is_file():
                     records[world, seed, env, TRACKED] = json.loads(p.read_text())["records"]
-    routes = {c.env: manifest.entries[c.key]["info"]["routes"] for c in cells
+    routes = {c.env: manifest.entry(c.key, ex.digests[c.key])["info"]["routes"] for c in cells
               if c.protocol == "grounded_routes" and manifest.status(c.key, ex.digests[c.key]) == "done"}
     fixed = [(GROUNDED, ph) for ph in s.fixed_policies]
     old = [(e, "BC+RL") for e in envs[1:]]
@@ -122,8 +122,10 @@ def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list
     return "\n\n".join(out)
 
 
-def _records(manifest: Manifest, key: str):
-    e = manifest.entries.get(key)
+def _records(ex: StudyCells, manifest: Manifest, key: str):
+    """The records of the study's eval cell `key` made with this study config's hash (another config's
+    evaluation under the same key, e.g. `grounding_recipe`'s BC+RL, is not this one's)."""
+    e = manifest.entry(key, ex.digests[key])
     return None if e is None or e["status"] != "done" else json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
 
 
@@ -135,8 +137,8 @@ def tables(ex: StudyCells, manifest: Manifest, envs: list[str], seeds: list[int]
         return "no seed has every environment's new-PPO evaluation yet"
     out = [f"seeds with every environment done: {done}; evaluated in the GROUNDED world, test split"]
     for env in envs:
-        runs = {"BC": [_records(manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC") for s in done],
-                "BC+RL old PPO": [_records(manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC+RL") for s in done],
+        runs = {"BC": [_records(ex, manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC") for s in done],
+                "BC+RL old PPO": [_records(ex, manifest, f"eval/{GROUNDED}/seed{s}/{env}:BC+RL") for s in done],
                 "BC+RL new PPO": [new[env, s] for s in done]}
         out += [f"-- trained in {env}", seed_table(runs, baseline="BC", pairs=[("BC+RL new PPO", "BC+RL old PPO")])]
     cross = {f"{env} BC+RL new PPO": [new[env, s] for s in done] for env in envs}

@@ -119,6 +119,30 @@ def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
     assert all(e["status"] == "done" for e in m.entries.values())
 
 
+def test_two_configs_on_one_out_keep_each_others_done_cells(tmp_path):
+    """`grounding` and `grounding_recipe` share cell keys: alternating them must re-run nothing, and each
+    config must read its own cell's folder, never the other's under the same key."""
+    a = _config(tmp_path, seeds=[0])
+    b = dataclasses.replace(a, study=dataclasses.replace(a.study, eval_episodes=7))  # every eval cell's hash moves
+    cells = plan_cells(a.study)
+    calls = []
+    execute = lambda cell, folder: calls.append(cell.key) or {"folder": str(folder)}  # noqa: E731
+    run_cells(a, cells, execute, tmp_path)
+    evals = [c.key for c in cells if c.kind == "eval"]
+    calls.clear()
+    m = run_cells(b, cells, execute, tmp_path)
+    assert calls == evals  # only what b changed
+    da, db = cell_digests(a, cells), cell_digests(b, cells)
+    calls.clear()
+    m = run_cells(a, cells, execute, tmp_path)
+    assert calls == []  # a's evaluations are still done under their own hash
+    assert run_cells(b, cells, execute, tmp_path) and calls == []
+    key = evals[0]
+    assert m.entry(key, da[key])["dir"] != m.entry(key, db[key])["dir"]
+    assert m.entry(key, da[key])["info"]["folder"] == m.entry(key, da[key])["dir"]
+    assert m.status(key, "0" * 64) is None and m.entry(key, "0" * 64) is None
+
+
 def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
     from wanderland_nav.compose.cli import compose_config
 

@@ -298,8 +298,8 @@ def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str])
     "grounded_routes" protocol."""
     out: dict[str, dict[tuple, list[dict]]] = {p: {} for p in PROTOCOLS}
     for cell in cells:
-        e = manifest.entries.get(cell.key)
         if cell.kind == "eval" and manifest.status(cell.key, digests[cell.key]) == "done":
+            e = manifest.entry(cell.key, digests[cell.key])
             recs = json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
             out[cell.protocol][(cell.env, cell.seed, *cell.policy)] = recs
             if cell.env == GROUNDED:

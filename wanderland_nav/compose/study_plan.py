@@ -168,8 +168,13 @@ def cell_digests(c: StudyConfig, cells: list[Cell]) -> dict[str, str]:
 
 
 class Manifest:
-    """`<out>/done.json`: key -> {hash, status (done | failed | blocked | running), dir, seconds, info | error}.
-    Rewritten atomically after every cell, so a killed study loses at most the cell it was running.
+    """`<out>/done.json`: key -> {hash, status (done | failed | blocked | running), dir, seconds, info | error,
+    earlier}. Rewritten atomically after every cell, so a killed study loses at most the cell it was running.
+
+    A key is one cell of the plan; its hash says which inputs made it. When a key runs again with another
+    hash (two study configs on one `out`, e.g. `grounding` and `grounding_recipe`, whose BC+RL evaluations
+    share keys), the earlier DONE entry moves under `earlier[<its hash>]` and still counts for that hash, so
+    alternating the configs re-runs nothing; its folder (named by hash) is never touched.
 
     Several study processes may share one `out` (e.g. one per seed on a multi-core box): `record` merges
     into the file as it is now under an exclusive lock, and `status` re-reads it, so one process sees the
@@ -183,10 +188,17 @@ class Manifest:
     def _read(self) -> dict[str, dict]:
         return json.loads(self.path.read_text()) if self.path.is_file() else {}
 
+    def entry(self, key: str, digest: str) -> dict | None:
+        """The entry `key` has for `digest` (current or earlier), as of the last `status` / `record`."""
+        e = self.entries.get(key)
+        if e is None or e.get("hash") == digest:
+            return e
+        return e.get("earlier", {}).get(digest)
+
     def status(self, key: str, digest: str) -> str | None:
         self.entries = self._read() or self.entries
-        e = self.entries.get(key)
-        return e["status"] if e is not None and e.get("hash") == digest else None
+        e = self.entry(key, digest)
+        return None if e is None else e["status"]
 
     def record(self, key: str, entry: dict, *, unless_taken: bool = False) -> bool:
         """Write `entry` for `key`; with `unless_taken`, only when no other live process has claimed or
@@ -202,7 +214,11 @@ class Manifest:
                     old.get("status") == "done" or (old.get("status") == "running" and process_alive(old.get("pid")))):
                 self.entries = now
                 return False
-            self.entries = {**now, key: entry}
+            earlier = dict(old.get("earlier", {}))
+            if old.get("status") == "done" and old.get("hash") != entry.get("hash"):
+                earlier[old["hash"]] = {k: v for k, v in old.items() if k != "earlier"}
+            earlier.pop(entry.get("hash"), None)  # the entry itself is now the current one for its hash
+            self.entries = {**now, key: {**entry, **({"earlier": earlier} if earlier else {})}}
             atomic_write_json(self.path, self.entries)
             return True
 
@@ -231,7 +247,7 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
         h = digests[cell.key]
         status = manifest.status(cell.key, h)
         if status == "done" or (status == "failed" and not c.study.retry_failed) or (
-                status == "running" and process_alive(manifest.entries[cell.key].get("pid"))):
+                status == "running" and process_alive(manifest.entry(cell.key, h).get("pid"))):
             log.info("cell %s: %s, skipped", cell.key, status)
             continue
         folder = out / "cells" / cell.kind / cell.folder_name(h)

@@ -22,12 +22,12 @@ def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, 
     """Counts per status, then one line per cell that is not done (with its error), and the episodes
     each environment's navmesh yielded (a broken navmesh shows up here)."""
     status = {c.key: manifest.status(c.key, digests[c.key]) or "not run" for c in cells}
-    status = {k: "interrupted" if v == "running" and not process_alive(manifest.entries[k].get("pid")) else v
+    status = {k: "interrupted" if v == "running" and not process_alive(manifest.entry(k, digests[k]).get("pid")) else v
               for k, v in status.items()}  # a killed study process leaves its cell "running"
     counts = {s: sum(v == s for v in status.values()) for s in dict.fromkeys(status.values())}
     lines = ["cells: " + ", ".join(f"{n} {s}" for s, n in counts.items()) + f" (of {len(cells)})"]
     for c in cells:
-        e = manifest.entries.get(c.key, {})
+        e = manifest.entry(c.key, digests[c.key]) or {}
         if status[c.key] in ("failed", "blocked"):
             lines.append(f"  {status[c.key]}: {c.key}: {e.get('error') or 'needs ' + ', '.join(e.get('blocked_by', []))}")
         if c.kind in ("train", "ppo") and status[c.key] == "done":
@@ -62,7 +62,7 @@ def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: 
     parts = [header, "\n".join(cell_status_lines(manifest, cells, digests)), table3(records["own"], envs, s.seeds)]
     chart = {}
     if "grounded_routes" in s.protocols:
-        routes = {c_.env: manifest.entries[c_.key]["info"]["routes"] for c_ in cells
+        routes = {c_.env: manifest.entry(c_.key, digests[c_.key])["info"]["routes"] for c_ in cells
                   if c_.protocol == "grounded_routes" and manifest.status(c_.key, digests[c_.key]) == "done"}
         fixed = [(GROUNDED, ph) for ph in s.fixed_policies]
         text, chart, _ = fig8_same_routes(records["grounded_routes"], envs, fixed, s.seeds, routes,
