@@ -158,3 +158,24 @@ def test_a_copied_study_compares_its_own_paths_by_what_they_name():
     assert _portable(cfg("/tmp/a")) == _portable(cfg("/tmp/b/out"))
     assert _portable(cfg("/tmp/a")) != _portable(cfg("/tmp/a", "episodes_study_00000000.json"))
     assert _portable({**cfg("/tmp/a"), "episodes": {"path": None, "num": 400}})["episodes"]["path"] is None
+
+
+def test_smoke_runs_a_staged_study_at_the_smoke_train_sizes():
+    """`+study=grounding_recipe debug=smoke` must stay minutes: the stage's pinned 44,800 frames are dropped, its
+    lr kept, and the ppo cells still exist; a user's own stage under smoke is left alone."""
+    from wanderland_nav.compose.cli import compose_config
+    from wanderland_nav.compose.schema import TrainConfig, typed_config
+
+    smoke = study_config(compose_config("study", ["+study=grounding_recipe", "debug=smoke"]))
+    assert smoke.study.ppo_stage == ["algo.ppo.lr=5.0e-5"] and smoke.study.presets == ["scale_1.2", "holes"]
+    cells = plan_cells(smoke.study)
+    ex = StudyCells(smoke, smoke.out, None, cells)
+    ppo = ex.cells["ppo/holes/seed0"]
+    p = typed_config(OmegaConf.to_container(ex.cell_train_config(ppo, ex.cell_dir(ppo.key)), resolve=True),
+                     TrainConfig).algo.ppo
+    assert (p.total_frames, p.frames_per_batch, p.lr) == (16, 8, 5e-5)
+    only_sizes = study_config(compose_config("study", ["+study=grounding", "debug=smoke",
+                                                       "+study.ppo_stage=['algo.ppo.total_frames=800']"]))
+    assert only_sizes.study.ppo_stage == ["algo.ppo.enabled=true"]  # still staged: its cells are exercised
+    own = study_config(compose_config("study", ["+study=grounding", "debug=smoke", "+study.ppo_stage=['algo.ppo.lr=1e-4']"]))
+    assert own.study.ppo_stage == ["algo.ppo.lr=1e-4"]

@@ -95,5 +95,11 @@ def study_config(cfg) -> StudyConfig:
 
     cfg = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
     if cfg.get("study_debug"):
-        cfg.study = OmegaConf.merge(cfg.get("study") or {}, cfg.study_debug)
+        debug = OmegaConf.to_container(cfg.study_debug)
+        drop = set(debug.pop("ppo_stage_drop", []))
+        study = OmegaConf.merge(cfg.get("study") or {}, debug)
+        if drop and study.get("ppo_stage"):  # a staged study's PPO at the debug train's sizes: still minutes
+            kept = [o for o in study.ppo_stage if o.split("=", 1)[0].lstrip("+~") not in drop]
+            study.ppo_stage = kept or ["algo.ppo.enabled=true"]  # still a stage, so its cells are exercised
+        cfg.study = study
     return typed_config(cfg, StudyConfig)
