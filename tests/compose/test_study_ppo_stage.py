@@ -58,7 +58,7 @@ def test_grounding_recipe_pins_the_learning_ppo_on_the_grounding_bc():
     recipe = study_config(compose_config("study", ["+study=grounding_recipe"]))
     grounding = study_config(compose_config("study", ["+study=grounding"]))
     assert recipe.study.train == grounding.study.train and grounding.study.ppo_stage == []
-    assert recipe.study.presets == ["video3dgs", "scale_0.8", "drift"] and recipe.study.seeds == [0, 1, 2]
+    assert recipe.study.presets == ["video3dgs", "scale_0.8", "drift"] and recipe.study.seeds == [0, 1, 2, 3, 4]
     assert recipe.study.protocols == ["grounded_routes"]
     cells = plan_cells(recipe.study)
     ex = StudyCells(recipe, recipe.out, None, cells)
