@@ -183,7 +183,12 @@ class StudyCells:
 
     # ------------------------------------------------------------------ the cells
     def __call__(self, cell: Cell, folder: Path) -> dict:
-        return getattr(self, f"_{cell.kind}")(cell, folder)
+        # a ppo cell is a train run whose config (`cell_train_config`) starts at its train cell's bc.pt
+        run = {"build": self._build, "init": self._init, "train": self._train, "ppo": self._train,
+               "eval": self._eval}
+        if cell.kind not in run:
+            raise ValueError(f"cell {cell.key}: unknown kind {cell.kind!r}; known: {sorted(run)}")
+        return run[cell.kind](cell, folder)
 
     def _build(self, cell: Cell, folder: Path) -> dict:
         from wanderland_nav.degrade import build_degraded_scene, preset
@@ -226,8 +231,6 @@ class StudyCells:
         return {"episodes_file": str(episodes), "episodes": counts, "asked": asked, "ppo_frames": ppo.total_frames,
                 "ppo_policy_updates": updates,
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
-
-    _ppo = _train  # dispatched by cell.kind: a ppo cell is a train run whose config (cell_train_config) starts at bc.pt
 
     def _eval(self, cell: Cell, folder: Path) -> dict:
         from wanderland_nav.compose.build import load_navmesh

@@ -6,7 +6,8 @@ consumes unchanged; `degradation_report(grounded, degraded)` measures it (`repor
 
 from .build import CORRECTION, build_degraded_scene
 from .poses import PoseCorrection, pose_correction
+from .report import degradation_report
 from .spec import PRESETS, DegradeSpec, preset
 
-__all__ = ["CORRECTION", "PRESETS", "DegradeSpec", "PoseCorrection", "build_degraded_scene", "pose_correction",
-           "preset"]
+__all__ = ["CORRECTION", "PRESETS", "DegradeSpec", "PoseCorrection", "build_degraded_scene",
+           "degradation_report", "pose_correction", "preset"]
