@@ -149,7 +149,9 @@ class EpisodeSource:
 
 @dataclass
 class RenderSettings:
-    max_gaussians: Optional[int] = 10000  # level of detail (render/lod.py); null: all
+    # Level of detail (render/lod.py): each view renders the coarsest hierarchy nodes whose bounding sphere
+    # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
+    lod_px: Optional[float] = 2.0
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
     backend: str = "torch"  # torch (packed eager) | compiled (torch.compile'd stages) | gsplat (CUDA extra)
 
@@ -253,7 +255,7 @@ class ReplayConfig:
     out: Optional[str] = None
     viewer: bool = False
     frames: str = "auto"  # auto | render | none
-    max_gaussians: Optional[int] = None
+    lod_px: Optional[float] = 2.0  # as train's render.lod_px (the same camera); null: every Gaussian
     agents: Optional[List[int]] = None
     max_episodes: int = 8
     max_points: int = 50000
