@@ -3,11 +3,11 @@
 For capture camera poses (a scene folder's cameras; a bare `.ply` gets orbit views around its splat),
 each resolution prints one line:
 
-    lod res=<px> psnr_db=<mean over views> ssim=<mean> gaussians_per_view=<cut size> ms_per_view=<cut>
-        full_ms_per_view=<all Gaussians> build_s=<hierarchy build or cache read>
+    lod res=<px> target_px=<cut size> psnr_db=<mean over views> ssim=<mean> gaussians_per_view=<cut size>
+        ms_per_view=<cut> full_ms_per_view=<all Gaussians> build_s=<hierarchy build or cache read>
 
     python experiments/render/bench_lod.py --scene <folder | splat.ply> --res 32 64 128 [--views 8]
-        [--target-px 1.0] [--topk 10000] [--no-full]
+        [--target-px 2 1] [--topk 10000] [--no-full]
 
 `--topk N` adds a `topk` line for the old camera (the N Gaussians of largest opacity x footprint) at the
 same views, for comparison. `--no-full` skips the reference (PSNR then unknown): for scenes whose full
@@ -76,8 +76,9 @@ def ssim(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return s.flatten(1).mean(1)
 
 
-def timed(fn, repeat: int):
-    fn()  # warm-up
+def timed(fn, repeat: int, warm: bool = True):
+    if warm:
+        fn()
     best = math.inf
     for _ in range(repeat):
         t = time.perf_counter()
@@ -91,17 +92,17 @@ def main() -> None:
     ap.add_argument("--scene", type=Path, required=True)
     ap.add_argument("--res", type=int, nargs="+", default=[32, 64, 128])
     ap.add_argument("--views", type=int, default=8)
-    ap.add_argument("--target-px", type=float, default=1.0)
+    ap.add_argument("--target-px", type=float, nargs="+", default=[2.0])
     ap.add_argument("--topk", type=int, default=None)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-full", action="store_true")
     a = ap.parse_args()
     splat, viewmats, Ks1, aspect = capture_views(a.scene, a.views)
     t = time.perf_counter()
-    h = load_splat(splat, lod_px=a.target_px)
+    h = load_splat(splat, lod_px=a.target_px[0])
     build_s = time.perf_counter() - t
     V = len(viewmats)
-    print(f"scene={a.scene} gaussians={h.num_leaves} nodes={len(h)} views={V} target_px={a.target_px} "
+    print(f"scene={a.scene} gaussians={h.num_leaves} nodes={h.num_nodes} views={V} "
           f"threads={torch.get_num_threads()}")
     topk = None
     if a.topk:
@@ -115,17 +116,20 @@ def main() -> None:
         K[:, :2] *= res  # intrinsics scale with the width; the height keeps the capture's aspect
         one = lambda g, i: render(g, vm[i:i + 1], K[i:i + 1], W, H, render_mode="RGB").rgb  # noqa: E731
         per_view = lambda g: torch.cat([one(g, i) for i in range(V)])  # noqa: E731
-        cut, cut_s = timed(lambda: per_view(h), a.repeat)
-        cams, _ = h.cut(vm, K, W, H, h.target_px)
-        n_cut = torch.bincount(cams, minlength=V).double().mean().item()
         full = full_s = None
         if not a.no_full:
-            full, full_s = timed(lambda: per_view(h.leaves), 1)
+            full, full_s = timed(lambda: per_view(h.leaves), 1, warm=False)
         fmt = lambda img: ("nan", "nan") if full is None else (  # noqa: E731
             f"{psnr(img, full).mean():.2f}", f"{ssim(img, full).mean():.4f}")
-        p, s = fmt(cut)
-        print(f"lod res={res} psnr_db={p} ssim={s} gaussians_per_view={n_cut:.0f} ms_per_view={1e3 * cut_s / V:.1f} "
-              f"full_ms_per_view={'nan' if full_s is None else f'{1e3 * full_s / V:.1f}'} build_s={build_s:.1f}")
+        for target in a.target_px:
+            ht = h.with_target(target)
+            cut, cut_s = timed(lambda: per_view(ht), a.repeat)
+            cams, _ = ht.cut(vm, K, W, H, target)
+            n_cut = torch.bincount(cams, minlength=V).double().mean().item()
+            p, s = fmt(cut)
+            print(f"lod res={res} target_px={target} psnr_db={p} ssim={s} gaussians_per_view={n_cut:.0f} "
+                  f"ms_per_view={1e3 * cut_s / V:.1f} full_ms_per_view={'nan' if full_s is None else f'{1e3 * full_s / V:.1f}'} "
+                  f"build_s={build_s:.1f}", flush=True)
         if topk is not None:
             img, tk_s = timed(lambda: per_view(topk), a.repeat)
             p, s = fmt(img)

@@ -53,17 +53,18 @@ def psnr(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 def test_merge_moment_matches_children_and_keeps_their_mass():
     g = random_gaussians(2000)
-    h = build_hierarchy(g, fanout=4)
+    h = build_hierarchy(g)
     n, N = h.nodes, len(g)
     kids = n.child_ids[n.child_ptr[0]:n.child_ptr[1]]  # the first interior node's children (leaves)
-    assert kids.numel() == 4 and bool((kids < N).all())
-    means, covars, opac, _ = h.gather(kids)
+    assert kids.numel() >= 2 and bool((kids < N).all())
+    means, covars, opac, sh = h.gather(kids)
     w = opac * _area(covars)
     mu = (w[:, None] * means).sum(0) / w.sum()
     d = means - mu
     cov = (w[:, None, None] * (covars + d[:, :, None] * d[:, None, :])).sum(0) / w.sum()
     torch.testing.assert_close(n.means[0], mu, rtol=1e-5, atol=1e-5)
     torch.testing.assert_close(n.covars[0], cov, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(n.sh[0], (w[:, None, None] * sh).sum(0) / w.sum(), rtol=1e-5, atol=1e-6)
     # mass: opacity x area of the parent equals its children's unless the parent saturates at opacity 1
     parent_mass = n.opacities * _area(n.covars)
     first = n.child_ptr[:-1]
@@ -77,8 +78,8 @@ def test_merge_moment_matches_children_and_keeps_their_mass():
 
 
 def test_tree_holds_every_gaussian_once_and_spheres_nest():
-    g = random_gaussians(1001)  # not a power of the fanout: ragged last groups
-    h = build_hierarchy(g, fanout=4)
+    g = random_gaussians(1001)
+    h = build_hierarchy(g)
     n, N = h.nodes, len(g)
     assert sorted(n.child_ids.tolist()) == list(range(h.num_nodes - 1))  # every node but the root, once
     parent_of = torch.repeat_interleave(torch.arange(N, h.num_nodes), n.child_ptr[1:] - n.child_ptr[:-1])
@@ -90,7 +91,7 @@ def test_tree_holds_every_gaussian_once_and_spheres_nest():
 
 def test_cut_at_zero_pixels_renders_exactly_the_leaves():
     g = random_gaussians(3000)
-    h = build_hierarchy(g, fanout=4, target_px=0.0)
+    h = build_hierarchy(g, target_px=0.0)
     vm, K = look_at_views(4, 12.0), intrinsics(4, 32)
     full = render(g, vm, K, 32, 32, render_mode="RGB+ED")
     cut = render(h, vm, K, 32, 32, render_mode="RGB+ED")
@@ -102,7 +103,7 @@ def test_cut_at_zero_pixels_renders_exactly_the_leaves():
 
 def test_cut_is_a_cut_and_shrinks_with_the_target():
     g = random_gaussians(3000)
-    h = build_hierarchy(g, fanout=4)
+    h = build_hierarchy(g)
     vm, K = look_at_views(3, 12.0), intrinsics(3, 32)
     N = len(g)
     ancestors = torch.full((h.num_nodes,), -1, dtype=torch.long)  # parent of each node
@@ -182,11 +183,12 @@ def test_bad_level_of_detail_settings_are_refused(tmp_path):
         load_splat(tmp_path / "empty.ply", lod_px=1.0)
 
 
-def test_stale_cache_of_another_build_is_ignored(tmp_path):
+def test_stale_cache_of_another_build_is_ignored(tmp_path, monkeypatch):
     path = tmp_path / "3dgs.ply"
     random_gaussians(300).save(path)
     h = load_splat(path, lod_px=1.0)
     sha = hier.file_sha256(path)
-    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha, fanout=h.fanout) is not None
-    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256="0" * 64, fanout=h.fanout) is None
-    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha, fanout=8) is None
+    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha) is not None
+    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256="0" * 64) is None
+    monkeypatch.setattr(hier, "FORMAT_VERSION", hier.FORMAT_VERSION + 1)
+    assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha) is None

@@ -8,8 +8,9 @@ moment-matched merge of its children, and each view renders the coarsest nodes t
 follows its pixels, not the scene's size.
 
 Tree: node ids `0..N-1` are the splat's Gaussians (the leaves, in file order), `N..T-1` the interior
-nodes, level by level, the root last. Children are consecutive runs of a Morton (Z-order) sort of the
-leaves, `fanout` per parent, so siblings are spatial neighbours. Every node carries a bounding sphere
+nodes, level by level, the root last. The levels are an octree over the splat's bounding cube (cells
+are Morton-code prefixes): a node merges the items of one cell, so siblings lie within one cube and a
+node's extent is bounded by its cell and its children's extents. Every node carries a bounding sphere
 that contains its children's spheres (leaves: 3.33 standard deviations, the renderer's own extent), so
 "too big to merge" and "visible" are monotone down the tree and a breadth-first descent finds the cut.
 
@@ -33,8 +34,8 @@ import torch
 from .gaussians import Gaussians
 from .packed import RADIUS_SIGMAS
 
-FORMAT_VERSION = 1
-MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [chunk, fanout, K, 3] temporaries)
+FORMAT_VERSION = 2
+MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [children, K, 3] temporaries)
 START_NODES = 256  # each view's descent starts at the largest level of at most this many nodes
 CULL_MARGIN_PX = 4.0  # the frustum is widened by this many pixels: the renderer's eps2d blur and +1 px bound
 
@@ -69,7 +70,7 @@ class GaussianHierarchy:
         self.leaves, self.nodes, self.target_px = leaves, nodes, float(target_px)
         self.num_leaves = len(leaves)
         self.root = self.num_leaves + nodes.means.shape[0] - 1 if nodes.means.shape[0] else 0
-        self.fanout = int(nodes.child_ptr[1] - nodes.child_ptr[0]) if nodes.means.shape[0] else 2
+        self._start: torch.Tensor | None = None
         self._leaf_opacities = leaves.opacities.detach()
 
     def __len__(self) -> int:
@@ -81,20 +82,20 @@ class GaussianHierarchy:
         return self.num_leaves + self.nodes.means.shape[0]
 
     def start_nodes(self, most: int = START_NODES) -> torch.Tensor:
-        """The largest level of at most `most` nodes:
-        where each view's descent starts. The levels above it are expanded by any view close enough to
-        need detail, so skipping them saves small steps per call; a view that would stop above it gets
-        this level instead (finer, never coarser)."""
-        sizes, n = [], self.num_leaves
-        while n > 1:  # level sizes: ceil-divided by the fanout from the leaves up
-            n = -(-n // self.fanout)
-            sizes.append(n)
-        first = self.num_leaves
-        for size in sizes:
-            if size <= most:
-                return torch.arange(first, first + size, device=self.nodes.radius.device)
-            first += size
-        return torch.tensor([self.root], device=self.nodes.radius.device)
+        """Where each view's descent starts: the cut below the root expanded level by level while it holds
+        at most `most` nodes. Views expand those top levels anyway whenever they need detail; a view that
+        would stop above them gets this cut instead (finer, never coarser)."""
+        if self._start is None:
+            N, frontier = self.num_leaves, torch.tensor([self.root], device=self.nodes.radius.device)
+            while bool((frontier >= N).any()):
+                inner = frontier >= N
+                _, kids = self._children(frontier[inner], frontier[inner] - N)
+                nxt = torch.cat([frontier[~inner], kids])
+                if nxt.numel() > most:
+                    break
+                frontier = nxt
+            self._start = frontier
+        return self._start
 
     @property
     def device(self) -> torch.device:
@@ -197,10 +198,16 @@ def _inside_planes(x, y, z, r, Ks, width: int, height: int) -> torch.Tensor:
 
 # ---- building ------------------------------------------------------------------------------------
 
-def morton_order(means: torch.Tensor) -> torch.Tensor:
-    """Indices that sort `means [N, 3]` along a 63-bit Z-order curve of their bounding box."""
-    lo, hi = means.min(0).values, means.max(0).values
-    q = ((means - lo) / (hi - lo).clamp_min(1e-12) * (2**21 - 1)).round().long().clamp_(0, 2**21 - 1)
+MORTON_BITS = 21  # per axis: 63-bit codes
+
+
+def morton_codes(means: torch.Tensor) -> torch.Tensor:
+    """63-bit Z-order codes `[N]` (int64) of `means [N, 3]` on a cubic grid over their bounding box, so
+    that a code prefix of 3 l bits names a cube (an octree cell) of side `extent / 2^l`."""
+    lo = means.min(0).values
+    extent = float((means.max(0).values - lo).max().clamp_min(1e-12))
+    top = 2**MORTON_BITS - 1
+    q = ((means - lo) / extent * top).round().long().clamp_(0, top)
 
     def spread(v: torch.Tensor) -> torch.Tensor:  # insert two zero bits between each of 21 bits
         v = (v | (v << 32)) & 0x1F00000000FFFF
@@ -209,8 +216,7 @@ def morton_order(means: torch.Tensor) -> torch.Tensor:
         v = (v | (v << 4)) & 0x10C30C30C30C30C3
         return (v | (v << 2)) & 0x1249249249249249
 
-    code = spread(q[:, 0]) | (spread(q[:, 1]) << 1) | (spread(q[:, 2]) << 2)
-    return torch.argsort(code, stable=True)
+    return spread(q[:, 0]) | (spread(q[:, 1]) << 1) | (spread(q[:, 2]) << 2)
 
 
 def _area(covars: torch.Tensor) -> torch.Tensor:
@@ -219,75 +225,102 @@ def _area(covars: torch.Tensor) -> torch.Tensor:
     return torch.pi * torch.sqrt(ev[..., 1] * ev[..., 2])
 
 
-def _merge(means, covars, opac, sh, radius, valid):
-    """Merge groups: inputs [P, k, ...] with `valid [P, k]`; -> parent means, covars, opacities, sh, radius."""
-    w = opac * _area(covars) * valid
-    none = w.sum(1, keepdim=True) <= 0  # all children transparent or flat: equal weights
-    w = torch.where(none, valid.to(w.dtype), w)
-    W = w.sum(1)  # [P]
-    wn = w / W[:, None]
-    mu = torch.einsum("pk,pki->pi", wn, means)
-    d = means - mu[:, None]
-    cov = torch.einsum("pk,pkij->pij", wn, covars + d[..., :, None] * d[..., None, :])
-    sh_p = torch.einsum("pk,pkc->pc", wn, sh.flatten(2)).view(sh.shape[0], *sh.shape[2:])
-    mass = (opac * _area(covars) * valid).sum(1)
-    alpha = (mass / _area(cov).clamp_min(1e-20)).clamp(max=1.0)
-    rad = torch.where(valid, d.norm(dim=-1) + radius, torch.zeros_like(radius)).max(1).values
+def _merge(rows, group: torch.Tensor, P: int):
+    """Merge the children `rows` (means [n,3], covars [n,3,3], opacities [n], sh [n,K,3], radius [n]) into
+    `P` parents; `group [n]` (sorted) is each child's parent. -> the parents' rows, in the same layout."""
+    means, covars, opac, sh, radius = rows
+    mass = opac * _area(covars)  # [n]
+    seg = lambda x: x.new_zeros((P,) + x.shape[1:]).index_add_(0, group, x)  # noqa: E731  segment sums
+    W = seg(mass)
+    flat = (W <= 0)[group]  # all children transparent or flat: equal weights
+    w = torch.where(flat, torch.ones_like(mass), mass)
+    w = w / seg(w)[group]
+    mu = seg(w[:, None] * means)
+    d = means - mu[group]
+    cov = seg(w[:, None, None] * (covars + d[:, :, None] * d[:, None, :]))
+    sh_p = seg(w[:, None, None] * sh)
+    alpha = (W / _area(cov).clamp_min(1e-20)).clamp(max=1.0)
+    rad = radius.new_zeros(P).scatter_reduce_(0, group, d.norm(dim=-1) + radius, "amax")
     return mu, cov, alpha, sh_p, rad
 
 
 @torch.no_grad()
-def build_hierarchy(gaussians: Gaussians, fanout: int = 4, target_px: float = 1.0) -> GaussianHierarchy:
-    """Merge `gaussians` bottom-up (batched per level, `MERGE_CHUNK` parents at a time) into a hierarchy."""
-    if fanout < 2:
-        raise ValueError(f"build_hierarchy: fanout must be >= 2, got {fanout}")
+def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHierarchy:
+    """Merge `gaussians` bottom-up along an octree: level l's nodes are the cubes of side extent / 2^(21-l)
+    (Morton-code prefixes) holding two or more items of the level below; a cube with one item passes it up
+    unchanged. Batched per level; `MERGE_CHUNK` parents merged at a time bounds the temporaries."""
     g = gaussians.detach()
     N = len(g)
     if N == 0:
         raise ValueError("build_hierarchy: the splat has no Gaussians")
     leaf_radius = RADIUS_SIGMAS * g.scales.max(-1).values
     leaf_cov, leaf_opac = g.covariances(), g.opacities
-    K = g.sh_rest.shape[1] + 1
-
-    def leaf_rows(ids):
-        return (g.means[ids], leaf_cov[ids], leaf_opac[ids], torch.cat([g.sh_dc[ids, None], g.sh_rest[ids]], 1),
-                leaf_radius[ids])
-
-    parts: list[tuple] = []  # per level: (means, covars, opacities, sh, radius) of its new nodes
-    child_lists = []
-    items = morton_order(g.means)  # the current level's node ids, in spatial order
-    radius = [leaf_radius]
-    rows = leaf_rows
+    code = morton_codes(g.means)
+    order = torch.argsort(code, stable=True)
+    items, code = order, code[order]  # the current level's node ids in Morton order, and their cells' codes
+    levels: list[tuple] = []  # rows (means, covars, opacities, sh, radius) of each level's new nodes
+    child_runs: list[torch.Tensor] = []  # per level: the children of its new nodes, in parent order
+    counts: list[torch.Tensor] = []  # per level: children per new node
     next_id = N
-    while items.numel() > 1:
-        P = -(-items.numel() // fanout)
-        pad = torch.full((P * fanout - items.numel(),), -1, dtype=torch.long)
-        groups = torch.cat([items, pad]).view(P, fanout)
-        out = []
-        for s in range(0, P, MERGE_CHUNK):
-            ids = groups[s:s + MERGE_CHUNK]
-            valid = ids >= 0
-            ids = torch.where(valid, ids, ids[:, :1]).view(-1)  # padding reads the group's first child, weight 0
-            m, c, a, h, r = rows(ids if rows is leaf_rows else ids - base)
-            k = valid.shape
-            out.append(_merge(m.view(*k, 3), c.view(*k, 3, 3), a.view(k), h.view(*k, K, 3), r.view(k), valid))
-        level = tuple(torch.cat([o[i] for o in out]) for i in range(5))
-        parts.append(level)
-        radius.append(level[4])
-        child_lists.append(items)
-        base = next_id
-        rows = (lambda lv: (lambda ids: tuple(x[ids] for x in lv)))(level)
-        items = torch.arange(next_id, next_id + P)
+
+    def rows(ids: torch.Tensor):
+        """Rows of node ids (leaves and earlier levels' nodes, mixed) in the merge layout."""
+        leaf = ids < N
+        parts = [(leaf, ids[leaf], (g.means, leaf_cov, leaf_opac, None, leaf_radius))]
+        first = N
+        for lv in levels:  # each earlier level's new nodes hold a contiguous id range
+            m = (ids >= first) & (ids < first + lv[0].shape[0])
+            parts.append((m, ids[m] - first, lv))
+            first += lv[0].shape[0]
+        n, K = ids.shape[0], g.sh_rest.shape[1] + 1
+        out = [g.means.new_empty(n, 3), g.means.new_empty(n, 3, 3), g.means.new_empty(n), g.means.new_empty(n, K, 3),
+               g.means.new_empty(n)]
+        for mask, local, src in parts:
+            if not bool(mask.any()):
+                continue
+            for i in range(5):
+                if i == 3 and src[3] is None:  # leaf SH: DC and rest are stored apart
+                    out[3][mask] = torch.cat([g.sh_dc[local, None], g.sh_rest[local]], 1)
+                else:
+                    out[i][mask] = src[i][local]
+        return out
+
+    for _ in range(MORTON_BITS):
+        if items.numel() == 1:
+            break
+        cell = code >> 3  # the parent cube of each item's cell
+        _, size = torch.unique_consecutive(cell, return_counts=True)
+        start = torch.cumsum(size, 0) - size
+        multi = size > 1
+        if not bool(multi.any()):
+            code = cell
+            continue
+        # the children of this level's new nodes: the items of the multi-item cells, in order
+        in_multi = torch.repeat_interleave(multi, size)
+        kids = items[in_multi]
+        P = int(multi.sum())
+        group = torch.repeat_interleave(torch.arange(P), size[multi])
+        parts, bounds = [], torch.cat([torch.searchsorted(group, torch.arange(0, P, MERGE_CHUNK)), torch.tensor([kids.numel()])])
+        for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            gi = group[a:b]
+            parts.append(_merge(rows(kids[a:b]), gi - gi[0], int(gi[-1] - gi[0]) + 1))
+        levels.append(tuple(torch.cat([p[i] for p in parts]) for i in range(5)))
+        child_runs.append(kids)
+        counts.append(size[multi])
+        new_ids = torch.full_like(size, -1)
+        new_ids[multi] = torch.arange(next_id, next_id + P)
+        new_ids[~multi] = items[start[~multi]]  # single items pass up unchanged
         next_id += P
-    cat = lambda i, empty: torch.cat([p[i] for p in parts]) if parts else empty  # noqa: E731
-    counts = [torch.bincount(torch.arange(c.numel()) // fanout) for c in child_lists]
+        items, code = new_ids, cell[start]
+    cat = lambda i, empty: torch.cat([lv[i] for lv in levels]) if levels else empty  # noqa: E731
+    K = g.sh_rest.shape[1] + 1
     nodes = InteriorNodes(
         means=cat(0, g.means.new_zeros(0, 3)), covars=cat(1, g.means.new_zeros(0, 3, 3)),
         opacities=cat(2, g.means.new_zeros(0)), sh=cat(3, g.means.new_zeros(0, K, 3)),
-        radius=torch.cat(radius),
+        radius=torch.cat([leaf_radius, cat(4, g.means.new_zeros(0))]),
         child_ptr=torch.cat([torch.zeros(1, dtype=torch.long), torch.cumsum(torch.cat(counts), 0)]) if counts
         else torch.zeros(1, dtype=torch.long),
-        child_ids=torch.cat(child_lists) if child_lists else torch.zeros(0, dtype=torch.long))
+        child_ids=torch.cat(child_runs) if child_runs else torch.zeros(0, dtype=torch.long))
     return GaussianHierarchy(gaussians, nodes, target_px)
 
 
@@ -301,23 +334,22 @@ def file_sha256(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
-def save_nodes(path: Path, nodes: InteriorNodes, *, source_sha256: str, fanout: int) -> None:
+def save_nodes(path: Path, nodes: InteriorNodes, *, source_sha256: str) -> None:
     """Write `nodes` as an uncompressed npz, atomically, with the splat's hash and the build settings."""
     from wanderland_nav.atomic import atomic_path
 
     arrays = {f.name: getattr(nodes, f.name).cpu().numpy() for f in fields(nodes)}
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays, source_sha256=np.array(source_sha256), fanout=np.array(fanout),
+            np.savez(fh, **arrays, source_sha256=np.array(source_sha256),
                      format_version=np.array(FORMAT_VERSION))
 
 
-def load_nodes(path: Path, *, source_sha256: str, fanout: int) -> InteriorNodes | None:
-    """The cached nodes when `path` holds a hierarchy of this splat (same hash, fanout, format); else None."""
+def load_nodes(path: Path, *, source_sha256: str) -> InteriorNodes | None:
+    """The cached nodes when `path` holds a hierarchy of this splat (same hash and format); else None."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            if (str(z["source_sha256"]) != source_sha256 or int(z["fanout"]) != fanout
-                    or int(z["format_version"]) != FORMAT_VERSION):
+            if str(z["source_sha256"]) != source_sha256 or int(z["format_version"]) != FORMAT_VERSION:
                 return None
             return InteriorNodes(*(torch.from_numpy(np.array(z[f.name])) for f in fields(InteriorNodes)))
     except (OSError, KeyError, ValueError):

@@ -3,7 +3,7 @@
 `load_splat(path, lod_px)` is how the framework loads a splat to render: a `GaussianHierarchy` cut per
 view at `lod_px` pixels (`hierarchy.py`; `render()` takes it in place of `Gaussians`), or, with
 `lod_px=None`, all Gaussians (the differentiable reference). The hierarchy is cached as
-`<splat stem>.lod.npz` beside the splat, keyed by the splat's sha256 and the build settings, written
+`<splat stem>.lod.npz` beside the splat, keyed by the splat's sha256 and the format version, written
 atomically, and rebuilt when either changes. A folder that cannot be written keeps its cache in
 `$WANDERLAND_CACHE` (default `~/.cache/wanderland_nav`) under the splat's hash, and says so.
 """
@@ -22,8 +22,6 @@ from .hierarchy import GaussianHierarchy, build_hierarchy, file_sha256, load_nod
 
 log = logging.getLogger(__name__)
 
-DEFAULT_FANOUT = 4
-
 
 def cache_path(splat: Path, sha256: str) -> Path:
     """Where the hierarchy of `splat` lives: beside it when its folder is writable, else the user cache."""
@@ -33,8 +31,7 @@ def cache_path(splat: Path, sha256: str) -> Path:
     return root / "lod" / f"{sha256[:32]}.lod.npz"
 
 
-def load_splat(path: str | os.PathLike, lod_px: float | None = 1.0, *, fanout: int = DEFAULT_FANOUT,
-               device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:
+def load_splat(path: str | os.PathLike, lod_px: float | None = 2.0, *, device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:
     """The splat at `path` as the camera renders it: its hierarchy cut at `lod_px` pixels, or (None) all Gaussians."""
     path = Path(path)
     leaves = Gaussians.load(path)
@@ -47,11 +44,11 @@ def load_splat(path: str | os.PathLike, lod_px: float | None = 1.0, *, fanout: i
         raise ValueError(f"render.lod_px must be >= 0 pixels or null (all Gaussians), got {lod_px}")
     sha = file_sha256(path)
     where = cache_path(path, sha)
-    nodes = load_nodes(where, source_sha256=sha, fanout=fanout) if where.is_file() else None
+    nodes = load_nodes(where, source_sha256=sha) if where.is_file() else None
     if nodes is None:
         t = time.perf_counter()
-        nodes = build_hierarchy(leaves, fanout).nodes
-        save_nodes(where, nodes, source_sha256=sha, fanout=fanout)
+        nodes = build_hierarchy(leaves).nodes
+        save_nodes(where, nodes, source_sha256=sha)
         log.info("%s: built the Gaussian hierarchy (%d Gaussians, %d merged nodes) in %.1f s -> %s",
                  path, len(leaves), nodes.means.shape[0], time.perf_counter() - t, where)
     return GaussianHierarchy(leaves, nodes, lod_px).to(device)
