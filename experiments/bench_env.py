@@ -1,7 +1,7 @@
 """Benchmark NavEnv: environment frames per second and where a step's time goes.
 
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
-                                    [--device cpu|cuda] [--threads 2] [--lod-px 2] [--no-off]
+                                    [--device cpu|cuda] [--threads 2] [--lod-px 1] [--no-off]
                                     [--compete 0] [--repeats 1] [--render-threads N] [--policy citywalker]
 
 `--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
@@ -33,6 +33,8 @@ import time
 from pathlib import Path
 
 import torch
+
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 
 def prepare(preset: str, root: Path, num_episodes: int, lod_px: float | None = None):
@@ -136,7 +138,7 @@ def main():
     ap.add_argument("--episodes", type=int, default=60)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=2.0,
+    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=DEFAULT_LOD_PX,
                     help="render.lod_px level of detail (none: all Gaussians)")
     ap.add_argument("--no-off", action="store_true", help="skip the camera-off row")
     ap.add_argument("--compete", type=int, default=0, help="CPU-bound busy-loop processes running alongside")

@@ -2,7 +2,7 @@
 
     PYTHONPATH=$PWD python experiments/real_streets/kitti_splat_frames.py --scene /tmp/kitti_street [--build] \
         [--more <degraded scene> ...] [--png experiments/real_streets/kitti_splat_frames.png] [--size 128] \
-        [--lod-px 2]
+        [--lod-px 1]
 
 `--build` first makes the KITTI v2 folder (`kitti_street.make_scene`) and its splat (`write_lidar_splat`). Then,
 per scene (the street and each `--more` one, e.g. the study's degraded copies), one frame at every other sensor
@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from kitti_street import SENSOR_HEIGHT, make_scene  # noqa: E402
@@ -60,7 +62,7 @@ def main(argv=None) -> None:
     ap.add_argument("--build", action="store_true")
     ap.add_argument("--png", type=Path, default=Path(__file__).with_name("kitti_splat_frames.png"))
     ap.add_argument("--size", type=int, default=128)
-    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=2.0)
+    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=DEFAULT_LOD_PX)
     ap.add_argument("--more", type=Path, nargs="*", default=[])
     a = ap.parse_args(argv)
     if a.build:

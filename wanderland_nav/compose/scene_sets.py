@@ -16,6 +16,7 @@ from functools import partial
 from pathlib import Path
 
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
 from wanderland_nav.envs.config import NavEnvConfig
@@ -82,6 +83,6 @@ def _scene_env(paths: dict[str, str], env_cfg: NavEnvConfig, split, device: str,
 
 
 def scene_env_fn(paths: dict[str, str], env_cfg: NavEnvConfig, *, split, device: str = "cpu",
-                 lod_px: float | None = 2.0):
+                 lod_px: float | None = DEFAULT_LOD_PX):
     """A picklable `(scene_id, sub_batch, seed) -> NavEnv` over the prepared `paths`."""
     return partial(_scene_env, dict(paths), env_cfg, split, device, lod_px)

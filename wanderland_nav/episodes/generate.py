@@ -36,6 +36,7 @@ from wanderland_nav.episodes.schema import (
     save_episodes,
 )
 from wanderland_nav.geometry import wrap_angle
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,7 @@ class GeneratorSettings:
     goal_image_height: int = 240
     goal_image_hfov_deg: float = 90.0
     goal_camera_height: float | None = None  # metres above the ground; None: median capture-camera height
-    goal_image_lod_px: float | None = 2.0  # the splat's level of detail for goal views (render/lod.py); None: all
+    goal_image_lod_px: float | None = DEFAULT_LOD_PX  # the splat's level of detail for goal views (render/lod.py); None: all
     render_device: str = "cpu"
     decimals: int = 4  # rounding of every written coordinate (0.1 mm)
 

@@ -16,6 +16,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.geometry import agent_camera_poses, frustum_mask, invert_rigid, pinhole_intrinsics
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +34,7 @@ def goal_camera_poses(goals_nav: np.ndarray, yaws_nav: np.ndarray, nav_from_scen
 def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np.ndarray,
                        nav_from_scene: np.ndarray, out_paths: Sequence[Path], *, height: float,
                        width: int = 320, image_height: int = 240, hfov_deg: float = 90.0, pitch: float = 0.0,
-                       batch: int = 8, lod_px: float | None = 2.0, device: str = "cpu") -> list[Path | None]:
+                       batch: int = 8, lod_px: float | None = DEFAULT_LOD_PX, device: str = "cpu") -> list[Path | None]:
     """Render one PNG per goal into `out_paths` (atomic writes); returns the paths (all None, with a
     warning, when the scene has no Gaussians: `gaussians_path=None`).
 

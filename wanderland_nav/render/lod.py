@@ -22,6 +22,11 @@ from .hierarchy import GaussianHierarchy, build_hierarchy, file_sha256, load_nod
 
 log = logging.getLogger(__name__)
 
+# Pixels (bounding-sphere radius) a node may project to before the cut descends into its children: at 1 px
+# the cut stays >= 30 dB PSNR from the full render on the demo scenes and the paper-size stress scene at
+# 32-128 px (experiments/render/README.md).
+DEFAULT_LOD_PX = 1.0
+
 
 def cache_path(splat: Path, sha256: str) -> Path:
     """Where the hierarchy of `splat` lives: beside it when its folder is writable, else the user cache."""
@@ -31,7 +36,7 @@ def cache_path(splat: Path, sha256: str) -> Path:
     return root / "lod" / f"{sha256[:32]}.lod.npz"
 
 
-def load_splat(path: str | os.PathLike, lod_px: float | None = 2.0, *, device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:
+def load_splat(path: str | os.PathLike, lod_px: float | None = DEFAULT_LOD_PX, *, device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:
     """The splat at `path` as the camera renders it: its hierarchy cut at `lod_px` pixels, or (None) all Gaussians."""
     path = Path(path)
     leaves = Gaussians.load(path)
