@@ -19,7 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def env_views(B: int, res: int, lod_px: float | None):
-    """(Gaussians, viewmats [B,4,4], Ks [B,3,3]) of the B agents right after a seeded env reset."""
+    """(Gaussians, viewmats [B,4,4], Ks [B,3,3]) of the B agents right after a seeded env reset.
+
+    The stage profiles take raw Gaussians: with `lod_px` set, those of the union of the B cameras' cuts."""
     from bench_env import prepare
 
     from wanderland_nav.envs import NavEnvConfig
@@ -40,7 +42,10 @@ def env_views(B: int, res: int, lod_px: float | None):
         env = make_nav_env(scene, config=cfg, batch_size=B, device="cpu", navmesh=navmesh, gaussians=None, seed=0)
     env.reset()
     viewmats = AgentCamera(cfg.camera, scene.nav_from_scene, None, None, "cpu").cam_from_world(env._pos, env._yaw)
-    return g, viewmats, camera_intrinsics(cfg.camera).expand(B, 3, 3).contiguous()
+    Ks = camera_intrinsics(cfg.camera).expand(B, 3, 3).contiguous()
+    if lod_px is not None:  # the nodes any of the B cameras renders, as one set of Gaussians
+        g = g.as_gaussians(g.cut(viewmats, Ks, res, res, g.target_px)[1].unique())
+    return g, viewmats, Ks
 
 
 def _best(fn, repeat: int):

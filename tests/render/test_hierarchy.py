@@ -193,3 +193,13 @@ def test_stale_cache_of_another_build_is_ignored(tmp_path, monkeypatch):
     assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256="0" * 64) is None
     monkeypatch.setattr(hier, "FORMAT_VERSION", hier.FORMAT_VERSION + 1)
     assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha) is None
+
+
+def test_nodes_as_gaussians_render_as_the_cut():
+    g = random_gaussians(2000)
+    h = build_hierarchy(g, target_px=2.0)
+    vm, K = look_at_views(1, 12.0), intrinsics(1, 32)
+    _, nodes = h.cut(vm, K, 32, 32, 2.0)
+    as_raw = h.as_gaussians(nodes)
+    torch.testing.assert_close(as_raw.covariances(), h.gather(nodes)[1], rtol=1e-3, atol=1e-6)
+    torch.testing.assert_close(render(as_raw, vm, K, 32, 32).rgb, render(h, vm, K, 32, 32).rgb, rtol=0, atol=2e-3)

@@ -131,6 +131,18 @@ class GaussianHierarchy:
         return means, covars, opac, sh
 
     @torch.no_grad()
+    def as_gaussians(self, ids: torch.Tensor) -> Gaussians:
+        """Nodes `ids [M]` as raw `Gaussians` (covariances factored into rotation and log-scales): a cut
+        saved as a PLY, or handed to code that takes plain Gaussians, renders as the cut does."""
+        means, covars, opac, sh = self.gather(ids)
+        ev, vec = torch.linalg.eigh(covars.double())  # ascending eigenvalues, orthonormal columns
+        vec[..., 2] *= torch.linalg.det(vec).sign()[:, None]  # a proper rotation
+        quats = _rotation_to_quat(vec).to(means.dtype)
+        log_scales = (0.5 * torch.log(ev.clamp_min(1e-30))).to(means.dtype)
+        logits = torch.logit(opac.clamp(1e-7, 1 - 1e-7))
+        return Gaussians(means, log_scales, quats, logits, sh[:, 0].contiguous(), sh[:, 1:].contiguous())
+
+    @torch.no_grad()
     def cut(self, viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int, target_px: float,
             *, near_plane: float = 0.01, camera_model: str = "pinhole") -> tuple[torch.Tensor, torch.Tensor]:
         """Per camera, the coarsest visible nodes whose bounding sphere projects to at most `target_px`
@@ -194,6 +206,22 @@ def _inside_planes(x, y, z, r, Ks, width: int, height: int) -> torch.Tensor:
         for tan, sign in ((hi / f, 1.0), (lo / f, -1.0)):
             ok &= (sign * coord - tan * z) / torch.sqrt(1 + tan * tan) <= r
     return ok
+
+
+def _rotation_to_quat(R: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices `[M, 3, 3]` -> unit wxyz quaternions `[M, 4]` (the largest of the four
+    candidate denominators per matrix, so no division by a small number)."""
+    m = R.reshape(-1, 9).unbind(-1)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = m
+    cand = torch.stack([
+        torch.stack([1 + r00 + r11 + r22, r21 - r12, r02 - r20, r10 - r01], -1),
+        torch.stack([r21 - r12, 1 + r00 - r11 - r22, r01 + r10, r02 + r20], -1),
+        torch.stack([r02 - r20, r01 + r10, 1 - r00 + r11 - r22, r12 + r21], -1),
+        torch.stack([r10 - r01, r02 + r20, r12 + r21, 1 - r00 - r11 + r22], -1),
+    ], 1)  # [M, 4, 4]: row k is 4 q_k q (unnormalised)
+    best = torch.stack([cand[:, k, k] for k in range(4)], -1).argmax(-1)
+    q = cand[torch.arange(R.shape[0]), best]
+    return torch.nn.functional.normalize(q, dim=-1)
 
 
 # ---- building ------------------------------------------------------------------------------------
