@@ -302,7 +302,7 @@ class NavEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         t0 = time.perf_counter()
         cfg = self.config
-        action = tensordict.get(keys.ACTION).to(self.device, torch.float32)
+        action = tensordict.get(keys.ACTION).detach().to(self.device, torch.float32)  # a rollout outside no_grad
         plan_xy, plan_yaw = plan_motion(self._pos[:, :2], self._yaw, action, cfg.kinematics)
         nonfinite = ~finite_actions(action)  # [B]: these agents stand still this step (kinematics docs)
         self._count_nonfinite(nonfinite)
@@ -542,14 +542,18 @@ class NavEnv(EnvBase):
         if torch.device(device) == self.device:
             return self
         super().to(device)
+        return self.move_state(self.device)
+
+    def move_state(self, device: torch.device) -> "NavEnv":
+        """The state half of `to`, without TorchRL's specs (which cannot live on `meta`: tests use it here)."""
         for name, value in list(vars(self).items()):
             if name not in ("_input_spec", "_output_spec", "navmesh", "field", "step_field"):
-                moved = _moved(value, self.device)
+                moved = _moved(value, device)
                 if moved is not value:
                     self.__dict__[name] = moved
-        self.camera.to(self.device)
+        self.camera.to(device)
         if self.expert is not None:
-            self.expert.to(self.device)
+            self.expert.to(device)
         return self
 
     def render(self) -> torch.Tensor:
