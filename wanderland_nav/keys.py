@@ -11,15 +11,27 @@ Frames
 
 Shapes below leave out the batch dimensions `[*B]` (the env's `batch_size`, usually `[B]`).
 
-Key tree of an env step (`td` after `reset`, `td["next"]` after `step`)::
+Key tree of an env step (`td` after `reset`, `td["next"]` after `step`); `?` marks keys that exist
+only when the env is built for them (`NavEnvConfig` and the task's episodes)::
 
-    rgb, depth?, past_positions, goal_vector, goal_pose,      observations: what a policy may read
-    goal_image, has_goal_image, instruction_tokens
-    privileged/                                               ground truth: experts, metrics, logs
+    past_positions, goal_vector, goal_pose                    observations: what a policy may read
+    rgb?, depth?                                              camera on (depth: camera.depth)
+    goal_image?, has_goal_image?                              an episode has a goal view (or the policy reads it)
+    instruction_tokens?                                       an episode has an instruction (or observe_instruction)
+    pixels?                                                   the newest frame, for video (pixels: true)
+    expert_action?                                            the expert's action here, an imitation label
+    privileged/?                                              ground truth: experts, BC labels, logs (privileged: true)
         episode_index, step_count, agent_position, agent_yaw,
         distance_to_goal, success, intervention, collision
+    episode/?                                                 the running episode's metrics, final at done
+        success, spl, navigation_error, path_length,          (episode_metrics: true)
+        shortest_length, steps, collisions, intervention
     action                                                    written by the policy
     reward, done, terminated, truncated                       step outputs (in "next")
+
+`privileged/`, `episode/` and `expert_action` are in the observation spec because TorchRL carries every
+per-step env output there (`step_mdp` moves exactly those keys to the root); they are never policy
+inputs. `wanderland_nav.make_env` builds the policy-facing env: no `privileged/`, metrics on.
 """
 
 # --------------------------------------------------------------------------- observations
@@ -50,6 +62,13 @@ HAS_GOAL_IMAGE = "has_goal_image"
 INSTRUCTION_TOKENS = "instruction_tokens"
 """int64 `[L]`: the episode's instruction as UTF-8 bytes + 1, right-padded with 0 (no tokenizer needed)."""
 
+PIXELS = "pixels"
+"""uint8 `[H, W, 3]`: the newest camera frame (`RGB[-1]`), one per agent: TorchRL's `VideoRecorder` key."""
+
+EXPERT_ACTION = "expert_action"
+"""float32, shape of `ACTION`: what the path-following expert (`envs.ExpertPolicy`, navmesh shortest path)
+would do from here; an imitation label computed from the privileged state, which itself stays out."""
+
 # --------------------------------------------------------------------------- privileged state
 PRIVILEGED = "privileged"
 """Sub-TensorDict of the env's state that no policy may read: the simulator's ground truth, for the
@@ -79,6 +98,40 @@ INTERVENTION = (PRIVILEGED, "intervention")
 
 COLLISION = (PRIVILEGED, "collision")
 """bool `[1]`: this step's motion was blocked or deflected by the navmesh boundary."""
+
+# --------------------------------------------------------------------------- episode metrics
+EPISODE = "episode"
+"""Sub-TensorDict of the running episode's metrics (`NavEnvConfig.episode_metrics`): updated every step,
+so at `("next", "done")` it holds the finished episode's final values; a reset zeroes it. What
+collectors and loggers read (the paper's NE / SR / SPL); never a policy input."""
+
+EPISODE_SUCCESS = (EPISODE, "success")
+"""bool `[1]`: the episode succeeded (so far: False until the step that ends it within the goal radius)."""
+
+EPISODE_SPL = (EPISODE, "spl")
+"""float32 `[1]`: success weighted by path length, `success * shortest / max(path, shortest)`."""
+
+EPISODE_NAVIGATION_ERROR = (EPISODE, "navigation_error")
+"""float32 `[1]`: Euclidean distance from the agent to the goal (the paper's NE), metres."""
+
+EPISODE_PATH_LENGTH = (EPISODE, "path_length")
+"""float32 `[1]`: horizontal distance walked in the episode, metres."""
+
+EPISODE_SHORTEST_LENGTH = (EPISODE, "shortest_length")
+"""float32 `[1]`: exact geodesic start -> goal length, metres."""
+
+EPISODE_STEPS = (EPISODE, "steps")
+"""int64 `[1]`: control steps taken."""
+
+EPISODE_COLLISIONS = (EPISODE, "collisions")
+"""int64 `[1]`: steps whose motion the navmesh boundary blocked or deflected."""
+
+EPISODE_INTERVENTION = (EPISODE, "intervention")
+"""bool `[1]`: the episode ended by intervention (stuck, no progress, off the navmesh)."""
+
+EPISODE_KEYS = (EPISODE_SUCCESS, EPISODE_SPL, EPISODE_NAVIGATION_ERROR, EPISODE_PATH_LENGTH, EPISODE_SHORTEST_LENGTH,
+                EPISODE_STEPS, EPISODE_COLLISIONS, EPISODE_INTERVENTION)
+"""Every `(EPISODE, name)` key the env writes."""
 
 # --------------------------------------------------------------------------- actions
 ACTION = "action"
@@ -125,9 +178,11 @@ OBSERVATION_KEYS = (
     HAS_GOAL_IMAGE,
     INSTRUCTION_TOKENS,
 )
-"""Keys every policy may read (plus `DEPTH` when enabled): the env's observation spec is exactly these
-and the `PRIVILEGED` sub-spec. With the camera off there are no images: no `RGB` / `DEPTH`, and no
-`GOAL_IMAGE` / `HAS_GOAL_IMAGE` unless the episodes' goal views were loaded."""
+"""Keys a policy may read (plus `DEPTH` when enabled), each present only when the env carries it: no
+`RGB` / `DEPTH` with the camera off, no `GOAL_IMAGE` / `HAS_GOAL_IMAGE` unless an episode has a goal view
+(or `NavEnvConfig.observe_goal_image`), no `INSTRUCTION_TOKENS` unless an episode has an instruction (or
+`observe_instruction`). The rest of the observation spec is `PIXELS`, `EXPERT_ACTION`, `PRIVILEGED` and
+`EPISODE` (see the key tree above)."""
 
 PRIVILEGED_KEYS = (EPISODE_INDEX, STEP_COUNT, AGENT_POSITION, AGENT_YAW, DISTANCE_TO_GOAL, SUCCESS, INTERVENTION,
                    COLLISION)

@@ -7,6 +7,7 @@ import dataclasses
 from functools import partial
 from pathlib import Path
 
+from wanderland_nav import keys
 from wanderland_nav.envs.config import NavEnvConfig
 
 
@@ -18,7 +19,9 @@ def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfi
     h, w = tuple(image_size) if image_size else need.image_size
     camera = dataclasses.replace(env.camera, height=int(h), width=int(w), history=max(env.camera.history, need.history))
     kinematics = dataclasses.replace(env.kinematics, num_waypoints=need.num_waypoints, action_mode=need.action_mode)
-    return dataclasses.replace(env, camera=camera, kinematics=kinematics)
+    reads = set(getattr(policy, "in_keys", ()))  # a policy that reads the goal view gets the key on point-goal tasks too
+    goal_view = True if keys.GOAL_IMAGE in reads else env.observe_goal_image
+    return dataclasses.replace(env, camera=camera, kinematics=kinematics, observe_goal_image=goal_view)
 
 
 def blind_env_config(env: NavEnvConfig) -> NavEnvConfig:

@@ -323,9 +323,40 @@ class ReconEvalConfig:
     lpips: LpipsPaths = field(default_factory=LpipsPaths)
 
 
+# ------------------------------------------------------------------------------ make_env (Python API)
+@dataclass
+class MakeEnvEpisodes:
+    path: Optional[str] = None
+    num: int = 60
+    seed: int = 0
+    goal_images: bool = False
+
+
+@dataclass
+class MakeEnvRender:
+    max_gaussians: Optional[int] = 10000
+    image_size: Optional[Tuple[int, int]] = None
+    backend: str = "torch"
+
+
+@dataclass
+class MakeEnvConfig:
+    """`conf/make_env.yaml`: `wanderland_nav.make_env`, one TorchRL env from Python."""
+
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    batch_size: int = 1
+    device: str = "cpu"
+    seed: int = 0
+    demo_preset: str = "tiny"
+    episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
+    render: MakeEnvRender = field(default_factory=MakeEnvRender)
+
+
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
            "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig,
-           "export_usd": ExportUsdConfig, "study": StudyConfig}
+           "export_usd": ExportUsdConfig, "study": StudyConfig, "make_env": MakeEnvConfig}
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):

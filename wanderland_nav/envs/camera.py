@@ -58,6 +58,16 @@ class AgentCamera:
         self.gaussians = gaussians
         self.background = torch.tensor(cfg.background, dtype=torch.float32, device=self.device)
         self.caller_threads: int | None = None  # the env caller's intra-op threads while NavEnv runs its ops on one
+        self.to(self.device)  # the Gaussians render where the camera is
+
+    def to(self, device) -> "AgentCamera":
+        """Intrinsics, pose frame, background and Gaussians (anything with `.to(device)`) onto `device`."""
+        self.device = torch.device(device)
+        self.nav_from_scene, self.K = self.nav_from_scene.to(self.device), self.K.to(self.device)
+        self.background = self.background.to(self.device)
+        if self.gaussians is not None and hasattr(self.gaussians, "to"):
+            self.gaussians = self.gaussians.to(self.device)
+        return self
 
     def cam_from_world(self, position_nav: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
         """position_nav `[B, 3]` (feet), yaw `[B]` -> `cam_from_world [B, 4, 4]` in the scene frame."""

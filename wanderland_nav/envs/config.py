@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Optional
 
 ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")
@@ -89,6 +89,15 @@ class NavEnvConfig:
     split: str | None = None  # episodes.json split the factory loads (None: all)
     goal_image: str = "auto"  # "auto": load the episode's goal_image file; "render": render every goal view; "none"
     instruction_length: int = 512  # L of keys.INSTRUCTION_TOKENS (UTF-8 bytes + 1, padded with 0)
+    # What the tensordicts carry besides the observations (keys.py has the tree). The trainer and the
+    # evaluator read the ground truth; a policy-facing env (wanderland_nav.make_env) leaves it out.
+    observe_goal_image: Optional[bool] = None  # goal_image / has_goal_image keys; None: when an episode has a goal view
+    observe_instruction: Optional[bool] = None  # instruction_tokens key; None: when an episode has an instruction
+    privileged: bool = True  # ("privileged", ...) ground truth: experts, BC labels, logs
+    expert_action: bool = False  # keys.EXPERT_ACTION: the path-following expert's action, an imitation label
+    episode_metrics: bool = False  # ("episode", ...) the running episode's metrics, final at done
+    pixels: bool = False  # keys.PIXELS: the newest frame [H, W, 3] per agent (VideoRecorder); needs the camera
+    finished_records: bool = True  # keep finished episodes' metrics for pop_finished_metrics() (grows until popped)
 
     def __post_init__(self) -> None:
         self.validate()
@@ -123,6 +132,7 @@ class NavEnvConfig:
             ("episode_order", self.episode_order in EPISODE_ORDERS, self.episode_order),
             ("goal_image", self.goal_image in GOAL_IMAGE_MODES, self.goal_image),
             ("instruction_length", self.instruction_length >= 1, self.instruction_length),
+            ("pixels", not self.pixels or c.enabled, "true with camera.enabled=false (no frames to show)"),
         ]
         for name, ok, value in checks:
             if not ok:

@@ -15,8 +15,14 @@ distance, at most 2 sqrt(2) cell sizes above it). A step whose distance is undef
 another island than its goal) keeps the last defined distance, can never succeed, and is counted. Episode-level metrics are accumulated
 per agent and handed out by `pop_finished_metrics()` for the trainer and the evaluator.
 
-With the camera off (blind or privileged agents) the env carries no image keys at all (spec and
-tensordicts), so TorchRL's resets and copies never touch blank frames.
+Keys exist only when they carry something (spec and tensordicts alike, fixed at construction): with the
+camera off (blind or privileged agents) there are no image keys, so TorchRL's resets and copies never
+touch blank frames; goal views and instruction tokens only when the task has them; the ground truth
+(`privileged/`), the episode metrics (`episode/`), `pixels` and `expert_action` as `NavEnvConfig` asks.
+
+`to(device)` (or the constructor's `device=`) moves every state tensor, the episode table, the goal
+views, the camera and its Gaussians; the navmesh and its distance fields stay on the CPU (the
+boundary copies there and back).
 
 State tensors are replaced, never written in place: the tensors returned in a step's TensorDict
 may be kept by a rollout, and must not change afterwards.
@@ -24,6 +30,7 @@ may be kept by a rollout, and must not change afterwards.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import time
@@ -74,6 +81,24 @@ def _one_intra_op_thread(method):
             self.camera.caller_threads = None
 
     return run
+
+
+def _moved(value, device):
+    """`value` with every tensor in it (dicts, lists, tuples, dataclasses such as `EpisodeTable`) on
+    `device`; the same object when it holds no tensor."""
+    if isinstance(value, torch.Tensor):
+        return value.to(device)
+    if isinstance(value, dict):
+        new = {k: _moved(v, device) for k, v in value.items()}
+        return new if any(new[k] is not value[k] for k in value) else value
+    if isinstance(value, (list, tuple)) and not hasattr(value, "_fields"):
+        new = [_moved(v, device) for v in value]
+        return type(value)(new) if any(a is not b for a, b in zip(new, value)) else value
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        new = {f.name: _moved(getattr(value, f.name), device) for f in dataclasses.fields(value)}
+        changed = {k: v for k, v in new.items() if v is not getattr(value, k)}
+        return dataclasses.replace(value, **changed) if changed else value
+    return value
 
 
 class NavEnv(EnvBase):
@@ -141,12 +166,24 @@ class NavEnv(EnvBase):
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
         self._init_goal_images(where, goal_images)
         # Image keys exist only when there are images: with the camera off, blank [B, T, H, W, 3] frames
-        # were ~85 % of a B=256 step (TorchRL's reset `where` and copies over them). Fixed at construction.
+        # were ~85 % of a B=256 step (TorchRL's reset `where` and copies over them); blank goal views and
+        # 512 instruction tokens were ~53 KB of ~300 KB per agent-step of a point-goal run at 128 px.
         self.carries_frames = cfg.camera.enabled
-        self.carries_goal_views = cfg.camera.enabled or bool(self._has_goal_image.any())
+        has_view, has_text = bool(self._has_goal_image.any()), bool(self.table.instruction_tokens.any())
+        self.carries_goal_views = has_view if cfg.observe_goal_image is None else cfg.observe_goal_image
+        self.carries_instruction = has_text if cfg.observe_instruction is None else cfg.observe_instruction
+        for name, carried, has in (("observe_goal_image", self.carries_goal_views, has_view),
+                                   ("observe_instruction", self.carries_instruction, has_text)):
+            if has and not carried:  # the task would be unsolvable without them: say so, do not drop them
+                raise ValueError(f"{where}: episodes carry {name[8:]}s but NavEnvConfig.{name}=false")
         if cfg.termination.success_radius is not None:
             self.table.goal_radius = torch.full_like(self.table.goal_radius, cfg.termination.success_radius)
         self.shortest_length = self._shortest_lengths(where)  # [E] exact geodesic start -> goal
+        self.expert = None
+        if cfg.expert_action:  # stateful (progress along each agent's path), driven by the env's own state
+            from wanderland_nav.envs.experts import ExpertPolicy
+
+            self.expert = ExpertPolicy(self)
         self._make_specs()
         self._init_state()
         self.timings: dict[str, float] = defaultdict(float)
@@ -183,27 +220,25 @@ class NavEnv(EnvBase):
         flag = lambda: Categorical(2, shape=(*B, 1), dtype=torch.bool, device=dev)  # noqa: E731
         # uint8 images as Unbounded: a Bounded spec would hold full-size low/high tensors (B*T*H*W*3 each)
         img = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
-        obs = {
-            keys.PAST_POSITIONS: f32(T, 2),
-            keys.GOAL_VECTOR: f32(2),
-            keys.GOAL_POSE: f32(4),
-            keys.INSTRUCTION_TOKENS: i64(L),
-            # ground truth no policy may read: nested under keys.PRIVILEGED by the keys themselves
-            keys.EPISODE_INDEX: i64(1),
-            keys.STEP_COUNT: i64(1),
-            keys.AGENT_POSITION: f32(3),
-            keys.AGENT_YAW: f32(1),
-            keys.DISTANCE_TO_GOAL: f32(1),
-            keys.SUCCESS: flag(),
-            keys.INTERVENTION: flag(),
-            keys.COLLISION: flag(),
-        }
+        obs = {keys.PAST_POSITIONS: f32(T, 2), keys.GOAL_VECTOR: f32(2), keys.GOAL_POSE: f32(4)}
+        if self.carries_instruction:
+            obs[keys.INSTRUCTION_TOKENS] = i64(L)
         if self.carries_frames:
             obs[keys.RGB] = img(T, H, W, 3)
             if c.depth:
                 obs[keys.DEPTH] = f32(T, H, W, 1)
         if self.carries_goal_views:
             obs.update({keys.GOAL_IMAGE: img(H, W, 3), keys.HAS_GOAL_IMAGE: flag()})
+        if self.config.pixels:
+            obs[keys.PIXELS] = img(H, W, 3)
+        if self.config.privileged:  # ground truth no policy may read: nested under keys.PRIVILEGED by the keys
+            obs.update({keys.EPISODE_INDEX: i64(1), keys.STEP_COUNT: i64(1), keys.AGENT_POSITION: f32(3),
+                        keys.AGENT_YAW: f32(1), keys.DISTANCE_TO_GOAL: f32(1), keys.SUCCESS: flag(),
+                        keys.INTERVENTION: flag(), keys.COLLISION: flag()})
+        if self.config.episode_metrics:
+            obs.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
+                              i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
+                        for key in keys.EPISODE_KEYS})
         self.observation_spec = Composite(obs, shape=B, device=dev)
         if k.action_mode == "waypoints":
             r = k.waypoint_range
@@ -212,6 +247,9 @@ class NavEnv(EnvBase):
             low = torch.tensor([0.0, -k.max_angular_speed], device=dev).expand(*B, 2)
             high = torch.tensor([k.max_linear_speed, k.max_angular_speed], device=dev).expand(*B, 2)
             self.action_spec = Bounded(low.clone(), high.clone(), shape=(*B, 2), dtype=torch.float32, device=dev)
+        if self.expert is not None:
+            self.observation_spec[keys.EXPERT_ACTION] = Unbounded(shape=self.action_spec.shape, dtype=torch.float32,
+                                                                  device=dev)
         self.reward_spec = Unbounded(shape=(*B, 1), dtype=torch.float32, device=dev)
         self.done_spec = Composite(
             {keys.DONE: flag(), keys.TERMINATED: flag(), keys.TRUNCATED: flag()}, shape=B, device=dev
@@ -235,7 +273,8 @@ class NavEnv(EnvBase):
         self._flags = {k: z(dtype=torch.bool) for k in (keys.SUCCESS, keys.INTERVENTION, keys.COLLISION)}
         self._agent_goal_image = z(H, W, 3, dtype=torch.uint8) if self.carries_goal_views else None
         self._agent_has_goal_image = z(1, dtype=torch.bool)
-        self._agent_tokens = z(self.config.instruction_length, dtype=torch.long)
+        self._agent_tokens = z(self.config.instruction_length, dtype=torch.long) if self.carries_instruction else None
+        self._outcome = {k: z(dtype=torch.bool) for k in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION)}
         self._started = False
 
     # ------------------------------------------------------------------ TorchRL API
@@ -263,7 +302,7 @@ class NavEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         t0 = time.perf_counter()
         cfg = self.config
-        action = tensordict.get(keys.ACTION).to(self.device, torch.float32)
+        action = tensordict.get(keys.ACTION).detach().to(self.device, torch.float32)  # a rollout outside no_grad
         plan_xy, plan_yaw = plan_motion(self._pos[:, :2], self._yaw, action, cfg.kinematics)
         nonfinite = ~finite_actions(action)  # [B]: these agents stand still this step (kinematics docs)
         self._count_nonfinite(nonfinite)
@@ -293,7 +332,8 @@ class NavEnv(EnvBase):
         self._push_frame(rgb, depth, end)
         terminated = success | intervention
         done = terminated | truncated
-        if bool(done.any()):
+        self._outcome = {keys.EPISODE_SUCCESS: success, keys.EPISODE_INTERVENTION: intervention}
+        if cfg.finished_records and bool(done.any()):
             self._record_finished(done.nonzero().flatten(), success, intervention, truncated, cause)
         out = self._observation()
         out.update(
@@ -362,10 +402,12 @@ class NavEnv(EnvBase):
         self._nonfinite = put(self._nonfinite, zl)
         self._undefined_steps = put(self._undefined_steps, zl)
         self._flags = {k: put(v, zl.bool()) for k, v in self._flags.items()}
+        self._outcome = {k: put(v, zl.bool()) for k, v in self._outcome.items()}
         if self.carries_goal_views:
             self._agent_goal_image = put(self._agent_goal_image, self._goal_images[ep])
         self._agent_has_goal_image = put(self._agent_has_goal_image, self._has_goal_image[ep].unsqueeze(-1))
-        self._agent_tokens = put(self._agent_tokens, self.table.instruction_tokens[ep])
+        if self.carries_instruction:
+            self._agent_tokens = put(self._agent_tokens, self.table.instruction_tokens[ep])
 
     def _record_finished(self, idx, success, intervention, truncated, cause) -> None:
         """Stash the metrics of the agents `idx` whose episode just ended (tensors; converted lazily)."""
@@ -390,11 +432,15 @@ class NavEnv(EnvBase):
         )
 
     def pop_finished_metrics(self) -> list[EpisodeMetrics]:
-        """Metrics of every episode that ended since the last call, in the order they ended.
+        """Metrics of every episode that ended since the last call, in the order they ended (kept while
+        `NavEnvConfig.finished_records`; a TorchRL user reads `("next", "episode", ...)` at done instead).
 
         `serial` on each record is the order in which the env *started* that episode since the
         last `set_seed`, which is what the evaluator uses to count each test episode once.
         """
+        if not self.config.finished_records:
+            raise RuntimeError("NavEnv.pop_finished_metrics: finished_records=false keeps no records; read the "
+                               "episode metrics at done, td['next', 'episode', ...] (episode_metrics=true)")
         out = []
         for rec in self._finished:
             cols = {k: v.detach().cpu().tolist() for k, v in rec.items()}
@@ -443,22 +489,78 @@ class NavEnv(EnvBase):
             keys.PAST_POSITIONS: past,
             keys.GOAL_VECTOR: goal,
             keys.GOAL_POSE: torch.cat([goal, torch.cos(dyaw)[:, None], torch.sin(dyaw)[:, None]], -1),
-            keys.INSTRUCTION_TOKENS: self._agent_tokens,
-            # (keys.PRIVILEGED, ...): the nested sub-TensorDict of ground truth
-            keys.EPISODE_INDEX: ep.unsqueeze(-1),
-            keys.STEP_COUNT: self._steps.unsqueeze(-1),
-            keys.AGENT_POSITION: self._pos,
-            keys.AGENT_YAW: yaw.unsqueeze(-1),
-            keys.DISTANCE_TO_GOAL: self._dist.unsqueeze(-1),
-            **{k: v.unsqueeze(-1) for k, v in self._flags.items()},
         }
+        if self.carries_instruction:
+            obs[keys.INSTRUCTION_TOKENS] = self._agent_tokens
         if self._rgb is not None:
             obs[keys.RGB] = self._rgb
+            if self.config.pixels:
+                obs[keys.PIXELS] = self._rgb[:, -1]
         if self._depth is not None:
             obs[keys.DEPTH] = self._depth
         if self.carries_goal_views:  # per-agent copies, replaced at reset only
             obs.update({keys.GOAL_IMAGE: self._agent_goal_image, keys.HAS_GOAL_IMAGE: self._agent_has_goal_image})
-        return TensorDict(obs, batch_size=[B], device=self.device)
+        truth = self._privileged()
+        if self.config.privileged:
+            obs.update(truth)
+        if self.config.episode_metrics:
+            obs.update(self._episode_metrics())
+        out = TensorDict(obs, batch_size=[B], device=self.device)
+        if self.expert is not None:  # the label from the ground truth, which itself may stay out
+            out.set(keys.EXPERT_ACTION, self.expert(TensorDict(truth, batch_size=[B])).get(keys.ACTION))
+        return out
+
+    def _privileged(self) -> dict:
+        """`(PRIVILEGED, name)` -> `[B, ...]`: the simulator's ground truth for experts, labels and logs."""
+        return {
+            keys.EPISODE_INDEX: self._ep.unsqueeze(-1),
+            keys.STEP_COUNT: self._steps.unsqueeze(-1),
+            keys.AGENT_POSITION: self._pos,
+            keys.AGENT_YAW: self._yaw.unsqueeze(-1),
+            keys.DISTANCE_TO_GOAL: self._dist.unsqueeze(-1),
+            **{k: v.unsqueeze(-1) for k, v in self._flags.items()},
+        }
+
+    def _episode_metrics(self) -> dict:
+        """`(EPISODE, name)` -> `[B, 1]`: the running episode's metrics; at done, the finished episode's
+        (the same definitions as `EpisodeMetrics`: NE Euclidean, SPL over the exact geodesic)."""
+        ep, success = self._ep, self._outcome[keys.EPISODE_SUCCESS]
+        shortest = self.shortest_length[ep]
+        ne = (self.table.goal_position[ep] - self._pos).norm(dim=-1)
+        spl = success.float() * shortest / torch.maximum(self._path_len, shortest).clamp_min(1e-9)
+        col = lambda x: x.unsqueeze(-1)  # noqa: E731
+        return {keys.EPISODE_SUCCESS: col(success), keys.EPISODE_SPL: col(spl), keys.EPISODE_NAVIGATION_ERROR: col(ne),
+                keys.EPISODE_PATH_LENGTH: col(self._path_len), keys.EPISODE_SHORTEST_LENGTH: col(shortest),
+                keys.EPISODE_STEPS: col(self._steps), keys.EPISODE_COLLISIONS: col(self._collisions),
+                keys.EPISODE_INTERVENTION: col(self._outcome[keys.EPISODE_INTERVENTION])}
+
+    # ------------------------------------------------------------------ device and display
+
+    def to(self, device) -> "NavEnv":
+        """Specs (TorchRL) and every state tensor, the episode table, the goal views and the camera (its K and
+        Gaussians) onto `device`; the navmesh and its distance fields stay on the CPU."""
+        if torch.device(device) == self.device:
+            return self
+        super().to(device)
+        return self.move_state(self.device)
+
+    def move_state(self, device: torch.device) -> "NavEnv":
+        """The state half of `to`, without TorchRL's specs (which cannot live on `meta`: tests use it here)."""
+        for name, value in list(vars(self).items()):
+            if name not in ("_input_spec", "_output_spec", "navmesh", "field", "step_field"):
+                moved = _moved(value, device)
+                if moved is not value:
+                    self.__dict__[name] = moved
+        self.camera.to(device)
+        if self.expert is not None:
+            self.expert.to(device)
+        return self
+
+    def render(self) -> torch.Tensor:
+        """The newest camera frame of every agent, uint8 `[B, H, W, 3]` (what `keys.PIXELS` carries)."""
+        if self._rgb is None:
+            raise RuntimeError("NavEnv.render: the camera is off (camera.enabled=false): no frames")
+        return self._rgb[:, -1]
 
     # ------------------------------------------------------------------ navmesh boundary (scene frame)
 
