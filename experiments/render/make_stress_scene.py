@@ -35,8 +35,10 @@ BLOCK_SHIFT = 40.4  # metres along the scene's z axis between the two copies of 
 
 def upsample_gaussians(g: Gaussians, count: int, shift: np.ndarray, gen: torch.Generator) -> Gaussians:
     """`count` Gaussians from `g` and its copy shifted by `shift`: each parent split into children sampled
-    inside it (0.6 of its spread), scales x0.6, same opacity and DC colour, SH degree 3 with small
-    seeded higher coefficients (real captures carry view dependence there)."""
+    inside it (0.6 of its spread), scales x0.6, same opacity and DC colour, and SH degree 3 with small
+    seeded higher coefficients per parent (real captures carry view dependence there). The children of a
+    parent share its coefficients: they sample one surface, whose view-dependent colour a fit makes
+    coherent; independent noise per child would be a texture no capture has."""
     both = torch.cat([g.means, g.means + torch.as_tensor(shift, dtype=g.means.dtype)])
     parent = torch.arange(count) % both.shape[0]
     src = parent % len(g)
@@ -46,8 +48,9 @@ def upsample_gaussians(g: Gaussians, count: int, shift: np.ndarray, gen: torch.G
     L = torch.linalg.cholesky(quat_scale_to_covar(R, g.scales[src]) + 1e-10 * torch.eye(3))
     eps = torch.randn(count, 3, 1, generator=gen) * 0.6
     means = both[parent] + (L @ eps)[..., 0]
-    rest = torch.randn(count, 15, 3, generator=gen) * 0.05
-    return Gaussians(means, g.log_scales[src] + np.log(0.6), g.quats[src], g.opacity_logits[src], g.sh_dc[src], rest)
+    rest = torch.randn(both.shape[0], 15, 3, generator=gen) * 0.05
+    return Gaussians(means, g.log_scales[src] + np.log(0.6), g.quats[src], g.opacity_logits[src], g.sh_dc[src],
+                     rest[parent])
 
 
 def upsample_points(xyz: np.ndarray, rgb: np.ndarray, count: int, shift: np.ndarray, rng: np.random.Generator):
@@ -64,7 +67,8 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=20_000_000)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    settings = {"gaussians": a.gaussians, "points": a.points, "seed": a.seed, "block_shift_m": BLOCK_SHIFT}
+    settings = {"gaussians": a.gaussians, "points": a.points, "seed": a.seed, "block_shift_m": BLOCK_SHIFT,
+                "sh_rest": "per parent"}
     marker = a.out / MARKER
     if marker.is_file() and json.loads(marker.read_text()) == settings:
         print(f"{a.out}: up to date")

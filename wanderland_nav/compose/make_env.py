@@ -66,7 +66,7 @@ def make_env(scene: str = "demo", *, policy=None, **overrides):
                                            generator=_generator(c.episodes.goal_images))
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
-    gaussians = scene_gaussians(loaded, c.render.max_gaussians, needed=env_cfg.camera.enabled)
+    gaussians = scene_gaussians(loaded, c.render.lod_px, needed=env_cfg.camera.enabled)
     return env_factory(loaded, episodes_path, env_cfg, split=None, batch_size=c.batch_size, seed=c.seed,
                        device=c.device, navmesh=load_navmesh(loaded), gaussians=gaussians)()
 

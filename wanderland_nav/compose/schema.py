@@ -333,13 +333,6 @@ class MakeEnvEpisodes:
 
 
 @dataclass
-class MakeEnvRender:
-    max_gaussians: Optional[int] = 10000
-    image_size: Optional[Tuple[int, int]] = None
-    backend: str = "torch"
-
-
-@dataclass
 class MakeEnvConfig:
     """`conf/make_env.yaml`: `wanderland_nav.make_env`, one TorchRL env from Python."""
 
@@ -351,7 +344,7 @@ class MakeEnvConfig:
     seed: int = 0
     demo_preset: str = "tiny"
     episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
-    render: MakeEnvRender = field(default_factory=MakeEnvRender)
+    render: RenderSettings = field(default_factory=RenderSettings)
 
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,

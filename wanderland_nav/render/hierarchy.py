@@ -77,6 +77,10 @@ class GaussianHierarchy:
         """The splat's Gaussians (the leaves), as `len(Gaussians)`; `num_nodes` counts the merged ones too."""
         return self.num_leaves
 
+    def _tensors(self) -> list[torch.Tensor]:
+        """Every tensor the hierarchy holds (the leaves' parameters, then the merged nodes')."""
+        return self.leaves._tensors() + [getattr(self.nodes, f.name) for f in fields(self.nodes)]
+
     @property
     def num_nodes(self) -> int:
         return self.num_leaves + self.nodes.means.shape[0]
