@@ -37,16 +37,50 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         # mkstemp makes 0600 files; give the artefact the permissions a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
         if tmp_path.exists():
-            os.chmod(tmp_path, 0o666 & ~umask)
+            os.chmod(tmp_path, 0o666 & ~_umask())
             _fsync_path(tmp_path, os.O_RDONLY)
         os.replace(tmp_path, target)
         _fsync_path(target.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+@contextlib.contextmanager
+def atomic_dir(target: str | os.PathLike) -> Iterator[Path]:
+    """Yield an empty temporary folder beside `target`; on success it replaces `target` as a whole.
+
+    For a set of files that belong together (the goal views of one episodes file): a reader sees the
+    old set or the complete new one, never a mix, and a killed writer leaves only a hidden temporary.
+    """
+    import shutil
+
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmpdir", dir=target.parent))
+    old = None
+    try:
+        yield tmp
+        for f in tmp.rglob("*"):
+            if f.is_file():
+                _fsync_path(f, os.O_RDONLY)
+        os.chmod(tmp, 0o777 & ~_umask())
+        if target.exists():  # a folder cannot be renamed onto a non-empty one: move the old set aside first
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old.tmpdir", dir=target.parent))
+            os.replace(target, old / "x")
+        os.replace(tmp, target)
+        _fsync_path(target.parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    finally:
+        for d in (tmp, old):
+            if d is not None and d.exists():
+                shutil.rmtree(d, ignore_errors=True)
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
 
 
 def _fsync_path(path: Path, flags: int) -> None:
