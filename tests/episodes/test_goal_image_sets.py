@@ -90,3 +90,26 @@ def test_a_view_replaced_by_hand_is_not_up_to_date(demo, tmp_path):
     view.write_bytes(view.read_bytes()[:-8] + bytes(8))
     _, summary = write_scene_episodes(scene, nm, out, num_episodes=1, seed=0, settings=TINY)
     assert not summary.skipped
+
+
+def test_no_episode_at_all_is_refused_with_the_navmesh_figures_and_nothing_written(demo, tmp_path):
+    import dataclasses
+
+    from planners import NavMesh
+    from wanderland_nav.episodes.generate import EmptyEpisodeSetError
+    from wanderland_nav.scene_preparation import load_collision_mesh
+
+    scene, nm = demo
+    # an agent as wide as the walkways: what is left of the navmesh is crumbs no route fits on
+    mesh = load_collision_mesh(scene.collision_mesh_path)
+    out = tmp_path / "episodes.json"
+    st = GeneratorSettings(sampler=SamplerSettings(batch_size=64, max_rounds=3), goal_images=False)
+    for radius, why in ((5.5, r"the drawn points fall off the navmesh \(off_mesh: \d+ of \d+ candidates\); the "
+                               r"navmesh has 1 island\(s\), [\d.]+ m\^2 walkable"),
+                        (8.0, r"no walkable area to draw from; the navmesh has 0 island\(s\), 0\.0 m\^2 walkable")):
+        wide = NavMesh.bake(mesh, dataclasses.replace(nm.settings, agent_radius=radius))
+        with pytest.raises(EmptyEpisodeSetError, match=rf"episodes\.json: 0 of 5 episodes for scene .* nothing "
+                                                       rf"written: {why}.*agent_radius {radius:g} m.*"
+                                                       r"navigation\.navmesh\.agent_radius"):
+            write_scene_episodes(scene, wide, out, num_episodes=5, seed=0, settings=st)
+        assert not out.exists()

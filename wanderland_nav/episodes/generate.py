@@ -24,6 +24,7 @@ import numpy as np
 
 from wanderland_nav.atomic import atomic_dir
 from wanderland_nav.cache import json_digest
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.episodes.goal_images import render_goal_images
 from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
 from wanderland_nav.episodes.paths import first_heading_nav, last_heading_nav, polyline_length, resample_polyline
@@ -416,6 +417,41 @@ def episodes_target(out: Path, *, force: bool) -> Path:
     return target
 
 
+class EmptyEpisodeSetError(WanderlandInputError):
+    """No episode survived: nothing is written (an empty episodes file would train and evaluate on nothing)."""
+
+
+#: what to change when one rejection reason took every candidate (the navmesh, not the sampler, is the
+#: usual cause: an agent radius that erodes every walkway leaves only crumbs off which nothing reaches)
+_REMEDY = {
+    "off_mesh": "the drawn points fall off the navmesh",
+    "not_near_camera": "no navmesh lies within generator.sampler.camera_radius of a capture camera",
+    "different_island": "start and goal never share a navmesh island",
+    "unreachable": "the planner finds no path between candidates",
+    "too_short": "no route reaches generator.sampler.min_geodesic",
+    "too_long": "every route exceeds generator.sampler.max_geodesic",
+}
+
+
+def _why_no_episodes(scene, navmesh, summary: GenerationSummary | None, settings: GeneratorSettings,
+                     requested: int) -> str:
+    """One sentence with the navmesh's figures and the rejection that dominated (summary None: nothing was
+    drawn, the navmesh has no walkable area)."""
+    islands = sorted(navmesh.islands, key=lambda i: -i.area)
+    ns = navmesh.settings
+    nav = (f"the navmesh has {len(islands)} island(s), {navmesh.area:.1f} m^2 walkable"
+           + (f", the largest {islands[0].area:.1f} m^2 reaching {islands[0].radius:.1f} m from its centre"
+              if islands else "") + f" (agent_radius {ns.agent_radius:g} m, agent_max_climb {ns.agent_max_climb:g} m)")
+    rej = summary.rejections if summary is not None else {}
+    top = max(rej, key=rej.get) if any(rej.values()) else None
+    why = (f"{_REMEDY.get(top, top)} ({top}: {rej[top]} of {summary.candidates} candidates)" if top else
+           f"{summary.candidates} candidates were drawn" if summary is not None else "no walkable area to draw from")
+    return (f"0 of {requested} episodes for scene {scene.name!r}, nothing written: {why}; {nav}. "
+            "Small or scattered islands come from an agent radius too large for the walkways "
+            "(navigation.navmesh.agent_radius) or a collision mesh without ground; else loosen generator.sampler "
+            f"(camera_radius {settings.sampler.camera_radius:g}, min_geodesic {settings.sampler.min_geodesic:g})")
+
+
 def _image_set(out: Path) -> Path | None:
     """The goal-view folder the episodes file at `out` names now (None: no file, no views, not ours)."""
     if not written_by_us(out):
@@ -467,6 +503,8 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
                 scene=scene.name, requested=num_episodes, kept=len(existing), candidates=0, rounds=0,
                 rejections={}, length_hist=length_histogram([e.geodesic_distance for e in existing]),
                 splits=split_counts, skipped=True, out=str(out))
+    if num_episodes > 0 and navmesh.area <= 0:
+        raise EmptyEpisodeSetError(_why_no_episodes(scene, navmesh, None, settings, num_episodes), path=out)
     episodes, summary = generate_episodes(
         scene, navmesh, num_episodes=num_episodes, seed=seed, settings=settings, instructions=instructions,
         goal_image_dir=image_dir, goal_image_base=out.parent, progress=progress)
@@ -476,6 +514,8 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
                       "settings": settings.to_dict(), "goal_images_digest": goal_images_digest(out.parent, episodes)},
         "summary": summary.to_dict(),
     }
+    if num_episodes > 0 and not episodes:
+        raise EmptyEpisodeSetError(_why_no_episodes(scene, navmesh, summary, settings, num_episodes), path=out)
     previous = _image_set(out)
     save_episodes(out, episodes, extras)
     _drop_unused_image_set(out, previous, keep=image_dir)
