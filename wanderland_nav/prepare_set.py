@@ -94,7 +94,7 @@ def prepare_one(job: SceneJob) -> dict:
         from wanderland_nav.episodes.generate import write_scene_episodes
 
         episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
-                                                 Path(scene.root) / "episodes.json", num_episodes=job.num_episodes,
+                                                 scene.products / "episodes.json", num_episodes=job.num_episodes,
                                                  seed=job.seed, settings=job.generator, force=job.force)
         out.update(episodes=len(episodes), expert_skipped=bool(summary.skipped))
     out["seconds"] = time.perf_counter() - t0

@@ -96,7 +96,7 @@ def capture_positions(scene: Scene) -> np.ndarray:
 
 def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bool = False) -> tuple[Path, dict]:
     """Write `collision_mesh.ply` (+ sidecar) for `scene` unless up to date. Returns (path, sidecar)."""
-    out = scene.root / COLLISION_MESH
+    out = scene.products / COLLISION_MESH
     inputs = scene_inputs(scene.root)
     digests = input_digests(scene.root, inputs)
     h = json_digest({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis,
@@ -138,8 +138,8 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
         log.info("navmesh up_axis %s replaced by the scene's %s (%s)", settings.up_axis, scene.up_axis,
                  scene.up_axis_source)
         settings = dataclasses.replace(settings, up_axis=scene.up_axis)
-    cm = scene.root / COLLISION_MESH
-    out = scene.root / NAVMESH
+    cm = scene.products / COLLISION_MESH
+    out = scene.products / NAVMESH
     cm_side = _read_sidecar(cm) or {}
     # the collision mesh's own bytes, not its sidecar: a mesh replaced by hand keeps the sidecar it found
     h = json_digest({"format": _FORMAT, "bake": settings.bake_hash(),
@@ -179,8 +179,8 @@ def check_navmesh_frame(scene: Scene) -> None:
     navmesh, an up axis changed in scene_meta.json after prepare): its floors would be walls. Checked where a
     scene is prepared or its artefacts are taken as they are, so the error names the file and both axes here,
     not deep inside the episode sampler. Unreadable files are left to `NavMesh.load` to report."""
-    path = scene.root / NAVMESH
-    if not path.is_file():
+    path = scene.navmesh_path
+    if path is None or not Path(path).is_file():
         return
     try:
         with np.load(path, allow_pickle=False) as z:

@@ -25,6 +25,7 @@ import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
 from wanderland_nav.scene import colmap as C
+from wanderland_nav.scene.products import products_dir
 from wanderland_nav.scene.types import Camera, Scene, SceneFormatError
 from wanderland_nav.scene.pointcloud import (LIDAR_SUFFIXES, PointCloudFormatError, read_ply_points,
                                              read_points_any)
@@ -60,9 +61,13 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
     else:
         points, colors, lidar_poses, lidar_filter = _load_v2_points(root, meta)
 
-    def opt(name: str) -> Path | None:
-        p = root / name
-        return p if p.is_file() else None
+    products = products_dir(root)  # before any computation: a read-only scene's files go to a cache folder
+
+    def opt(name: str) -> Path | None:  # a generated file: where this run writes it first, then beside the scene
+        for d in ([products] if products is not None else []) + [root]:
+            if (d / name).is_file():
+                return d / name
+        return None
 
     return Scene(
         name=(meta.name if meta and meta.name else root.name), root=root, version=version, up_axis=up,
@@ -72,7 +77,7 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
         environment=meta.environment if meta else None, indoor_regions=meta.indoor_regions if meta else [],
         up_axis_source=source, mesh_path=opt("scene.ply") if version == "v2" else None,
         meta={**(meta.raw if meta else {}), **({"lidar_filter": lidar_filter} if lidar_filter else {})},
-        lidar_poses=lidar_poses,
+        lidar_poses=lidar_poses, products_root=products,
     )
 
 
