@@ -161,9 +161,10 @@ def _dense_expert_locations(scene, navmesh, paths, R_ns: np.ndarray,
     counts = np.array([len(d) for d in dense], dtype=np.int64)
     flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
     if len(flat):
-        # heights from the navmesh surface: the linear interpolation between corners is on the mesh
-        # horizontally (the funnel path stays inside its corridor) but not vertically on slopes
-        flat = np.asarray(navmesh.snap_point(flat, max_distance=1e9), dtype=np.float64)
+        # heights from the navmesh floor under each sample, xy kept: the linear interpolation between corners
+        # is on the mesh horizontally (the funnel path stays inside its corridor) but not vertically on slopes
+        # and steps; a 3D-nearest snap would pull samples beside a step onto its edge (bunched, then a gap)
+        flat = np.asarray(navmesh.floor_points(flat), dtype=np.float64)
         indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
     else:
         indoor_flat = np.zeros(0, dtype=bool)
