@@ -128,6 +128,12 @@ def test_checkpoint_with_numpy_legacy_rng_still_loads(tmp_path):
     assert np.array_equal(np.random.rand(2), expected)
 
 
+def test_numpy_numbers_are_saved_as_python_numbers(tmp_path):
+    path = save_checkpoint(tmp_path / "c.pt", policy=torch.nn.Linear(2, 2), optimizer=None, counters={"it": 1},
+                           extra={"bc": {"loss": np.float64(0.5), "n": np.int64(3), "lr": np.float32(0.25)}})
+    assert load_checkpoint(path)["extra"] == {"bc": {"loss": 0.5, "n": 3, "lr": 0.25}}
+
+
 def test_saving_something_that_would_need_code_to_load_is_refused_naming_the_key(tmp_path):
     with pytest.raises(TypeError, match=r"checkpoint\.config\.out is a PosixPath: a checkpoint holds plain data"):
         save_checkpoint(tmp_path / "c.pt", policy=torch.nn.Linear(2, 2), optimizer=None, counters={},

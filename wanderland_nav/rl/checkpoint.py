@@ -15,6 +15,7 @@ and the global it asked for. Checkpoints are shared between people; a `.pt` is a
 from __future__ import annotations
 
 import random
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -48,20 +49,23 @@ def set_rng_state(state: dict[str, Any]) -> None:
 _LEGACY_NUMPY = (np._core.multiarray._reconstruct, np.ndarray, np.dtype, np.dtypes.UInt32DType)
 
 
-def _plain_data(value: Any, where: str = "checkpoint") -> None:
-    """Refuses (naming the key) what `weights_only=True` could not load back: save only what loads safely."""
-    if value is None or isinstance(value, (bool, int, float, str, torch.Tensor, torch.Size)):
-        return
-    if isinstance(value, dict):
-        for k, v in value.items():
-            if not isinstance(k, (str, int)):
-                raise TypeError(f"{where}: key {k!r} is a {type(k).__name__}, not plain data")
-            _plain_data(v, f"{where}.{k}")
-        return
-    if isinstance(value, (list, tuple)):
-        for i, v in enumerate(value):
-            _plain_data(v, f"{where}[{i}]")
-        return
+def _plain_data(value: Any, where: str = "checkpoint") -> Any:
+    """`value` as what `weights_only=True` loads back: numpy scalars become Python numbers (lossless); anything
+    else that is not plain data is refused naming its key, so a save never writes what a safe load refuses.
+    Containers come back as they are (state dicts keep their `_metadata`) unless a value in them changed."""
+    if isinstance(value, np.generic) and value.dtype.kind in "biuf":
+        return value.item()
+    if value is None or type(value) in (bool, int, float, str) or isinstance(value, (torch.Tensor, torch.Size)):
+        return value
+    if type(value) in (dict, OrderedDict):
+        bad = next((k for k in value if type(k) not in (str, int)), None)
+        if bad is not None:
+            raise TypeError(f"{where}: key {bad!r} is a {type(bad).__name__}, not plain data")
+        new = {k: _plain_data(v, f"{where}.{k}") for k, v in value.items()}
+        return value if all(new[k] is v for k, v in value.items()) else type(value)(new)
+    if type(value) in (list, tuple):
+        new = [_plain_data(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        return value if all(a is b for a, b in zip(new, value)) else type(value)(new)
     raise TypeError(f"{where} is a {type(value).__name__}: a checkpoint holds plain data only "
                     "(tensors, numbers, strings, lists, dicts), so it loads without running code")
 
@@ -81,7 +85,7 @@ def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: tor
         "rng": rng_state(),
         "extra": extra or {},
     }
-    _plain_data(payload)
+    payload = _plain_data(payload)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
     return path
