@@ -195,7 +195,7 @@ def views_costs(path: str, sizes: list[int], repeat: int) -> None:
     uses only `render` and `Gaussians`, which every code version has."""
     from wanderland_nav.render import Gaussians, render
 
-    d = torch.load(path)
+    d = torch.load(path, weights_only=True)
     g, V, K, res = Gaussians(**d["gaussians"]), d["V"], d["K"], d["res"]
     B = V.shape[0]
     with torch.no_grad():

@@ -485,6 +485,23 @@ class NavMesh:
         out = self.to_scene(torch.cat([xy, z[:, None]], 1))
         return out.reshape(shape).numpy()
 
+    def floor_points(self, points) -> np.ndarray:
+        """`points[...,3]` (scene frame) moved along the up axis onto the navmesh floor of their column, on the
+        level nearest in height; xy is kept. A point over no triangle takes its nearest navmesh point.
+
+        For samples of a path found on this navmesh: they never move sideways (a 3D-nearest snap pulls
+        samples beside a step onto its edge, where they bunch up and leave gaps), so samples spaced evenly
+        on the ground plane stay so, each at the height of the floor under it."""
+        p = self._check_points(points)
+        loc = self.to_local(p.reshape(-1, 3))
+        tri, z = self._locate_local(loc, float("inf"), return_z=True)
+        out = torch.cat([loc[:, :2], z[:, None]], 1)
+        miss = torch.nonzero(tri < 0)[:, 0]
+        if miss.shape[0]:
+            _, xy, zm, _ = self._snap_local(loc[miss], None)
+            out[miss] = torch.cat([xy, zm[:, None]], 1)
+        return self.to_scene(out).reshape(p.shape).numpy()
+
     def is_navigable(self, points, max_height_delta: float = 0.5) -> np.ndarray:
         """Whether each point `[...,3]` lies on the navmesh within `max_height_delta` of its floor."""
         p = self._check_points(points)

@@ -68,11 +68,23 @@ def test_collision_cache_and_invalidation(demo_copy):
     s4 = prepare_scene(demo_copy, collision=CollisionSettings(voxel_size=0.35), bake_navmesh=False)
     assert s4.meta["prepare"]["collision_mesh"]["skipped"] is False
     assert s4.meta["prepare"]["collision_mesh"]["faces"] != cm["faces"]
-    # a newer input does
+    # the key is the inputs' content: a touched file with the same bytes keeps the mesh ...
+    pcd = demo_copy / "raw_pcd.ply"
     future = s4.collision_mesh_path.stat().st_mtime + 10
-    os.utime(demo_copy / "raw_pcd.ply", (future, future))
+    os.utime(pcd, (future, future))
     assert prepare_scene(demo_copy, collision=CollisionSettings(voxel_size=0.35),
-                         bake_navmesh=False).meta["prepare"]["collision_mesh"]["skipped"] is False
+                         bake_navmesh=False).meta["prepare"]["collision_mesh"]["skipped"] is True
+    # ... and a cloud replaced with its old time kept (`cp -p`, `rsync -a`) rebuilds it
+    from wanderland_nav.scene.pointcloud import read_ply_points, write_ply_points
+
+    pc = read_ply_points(pcd)
+    old = pcd.stat()
+    write_ply_points(pcd, pc.xyz[: len(pc.xyz) // 2], pc.rgb[: len(pc.xyz) // 2])
+    os.utime(pcd, ns=(old.st_atime_ns, old.st_mtime_ns))
+    s5 = prepare_scene(demo_copy, collision=CollisionSettings(voxel_size=0.35), bake_navmesh=False)
+    assert s5.meta["prepare"]["collision_mesh"]["skipped"] is False
+    assert s5.meta["prepare"]["collision_mesh"]["points_in"] == len(pc.xyz) // 2
+    assert s5.meta["prepare"]["collision_mesh"]["inputs"]["raw_pcd.ply"] == scene_preparation._file_digest(pcd)
     # force always rebuilds; an up-axis override is part of the key
     assert prepare_scene(demo_copy, collision=CollisionSettings(voxel_size=0.35), bake_navmesh=False,
                          force=True).meta["prepare"]["collision_mesh"]["skipped"] is False

@@ -39,13 +39,16 @@ class NonFiniteLossError(RuntimeError):
     epoch, minibatch or round/update) and which term; raised before the optimiser steps on it."""
 
 
-def torch_load(path: str | os.PathLike, *, what: str, weights_only: bool, map_location: Any = "cpu") -> Any:
-    """`torch.load` that names the file: missing -> FileNotFoundError, truncated/corrupt -> WanderlandInputError.
+def torch_load(path: str | os.PathLike, *, what: str, map_location: Any = "cpu") -> Any:
+    """`torch.load(weights_only=True)` that names the file: missing -> FileNotFoundError, truncated/corrupt ->
+    WanderlandInputError, and a file that asks for a global (a class, `os.system`) refused as such.
 
     torch's own messages ("PytorchStreamReader failed reading zip archive", "invalid load key") name
-    no file, and a run that reads several checkpoints cannot say which one is broken.
+    no file, and a run that reads several checkpoints cannot say which one is broken. Never
+    `weights_only=False`: a `.pt` is a pickle, and checkpoints are passed between people.
     """
     import pickle
+    import re
     import zipfile
 
     import torch
@@ -54,8 +57,16 @@ def torch_load(path: str | os.PathLike, *, what: str, weights_only: bool, map_lo
     if not path.is_file():
         raise FileNotFoundError(f"{what} not found: {path}")
     try:
-        return torch.load(path, map_location=map_location, weights_only=weights_only)
+        return torch.load(path, map_location=map_location, weights_only=True)
     except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError, OSError) as e:
-        detail = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        text = str(e)
+        needs = re.search(r"unsupported (?:global: )?GLOBAL ([\w.]+)", text, re.I)
+        if needs:  # weights_only=True met a pickled callable or class: the file wants to run code
+            raise WanderlandInputError(
+                f"{what} refused: it needs code to load (global {needs.group(1)}), and loading it could run "
+                "that code; only plain-data files (tensors, numbers, strings, lists, dicts) are read",
+                path=path) from None
+        why = re.search(r"WeightsUnpickler error:\s*(\S[^\n]*)", text)  # torch's own line, under its boilerplate
+        detail = why.group(1) if why else text.strip().splitlines()[0] if text.strip() else type(e).__name__
         raise WanderlandInputError(f"not a readable {what} (truncated or corrupt; delete it to start "
                                    f"fresh): {detail}", path=path) from e

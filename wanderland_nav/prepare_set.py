@@ -63,9 +63,19 @@ class SceneJob:
         keep = ("demo_seed", "demo_preset", "collision", "navmesh")
         return _digest({k: v for k, v in asdict(self).items() if k in keep})
 
+    def inputs_hash(self) -> str:
+        """The contents of the scene folder's inputs (scans, poses, meta); "demo" for a demo seed, whose
+        folder the job itself builds from its settings. A scan replaced after the run is seen here."""
+        if self.demo_seed is not None:
+            return "demo"
+        from wanderland_nav.scene_preparation import input_digests, scene_inputs
+
+        root = Path(self.path)
+        return _digest(input_digests(root, scene_inputs(root)))
+
     def done_by(self, entry: dict | None) -> bool:
-        """Whether a done-manifest entry covers this job."""
-        if entry is None or self.force:
+        """Whether a done-manifest entry covers this job (same settings, same input contents)."""
+        if entry is None or self.force or entry.get("inputs_hash") != self.inputs_hash():
             return False
         return entry.get("settings_hash") == self.settings_hash() or (
             not self.expert and entry.get("prepare_hash") == self.prepare_hash())
@@ -94,7 +104,7 @@ def prepare_one(job: SceneJob) -> dict:
         from wanderland_nav.episodes.generate import write_scene_episodes
 
         episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
-                                                 Path(scene.root) / "episodes.json", num_episodes=job.num_episodes,
+                                                 scene.products / "episodes.json", num_episodes=job.num_episodes,
                                                  seed=job.seed, settings=job.generator, force=job.force)
         out.update(episodes=len(episodes), expert_skipped=bool(summary.skipped))
     out["seconds"] = time.perf_counter() - t0
@@ -170,7 +180,8 @@ def run_batch(jobs: list[SceneJob], done_manifest: str | Path, *, workers: int =
 
     def finished(job: SceneJob, result: dict | None, error: str | None) -> None:
         if error is None:
-            entry = {**result, "settings_hash": job.settings_hash(), "prepare_hash": job.prepare_hash()}
+            entry = {**result, "settings_hash": job.settings_hash(), "prepare_hash": job.prepare_hash(),
+                     "inputs_hash": job.inputs_hash()}
             manifest["done"][job.scene_id] = report.done[job.scene_id] = entry
             manifest["failed"].pop(job.scene_id, None)
         else:

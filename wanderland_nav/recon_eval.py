@@ -13,6 +13,7 @@ Examples:
 from __future__ import annotations
 
 import os
+import sys
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as in fit.py: no spinning OpenMP threads on shared CPUs
 
@@ -20,6 +21,8 @@ from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig, OmegaConf
+
+from wanderland_nav.compose.cli import quote_overrides
 
 
 def run(cfg: dict) -> dict:
@@ -99,4 +102,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
     main()

@@ -23,6 +23,7 @@ from omegaconf import DictConfig
 from wanderland_nav.compose import typed_config
 from wanderland_nav.compose.replaying import replay_frames, replay_inputs
 from wanderland_nav.compose.schema import ReplayConfig
+from wanderland_nav.compose.cli import quote_overrides
 
 
 def run(cfg: DictConfig) -> dict:
@@ -52,4 +53,5 @@ if __name__ == "__main__":
     if any(a.startswith("scene=") for a in sys.argv[1:]):  # Hydra's own message names no way out
         sys.exit("replay takes rollout=<file.npz> or episodes=<episodes.json> [scene_path=<scene folder>], not "
                  "scene=: a rollout records its own scene (over a scene set, replay one scene's file at a time)")
+    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
     main()

@@ -1,10 +1,12 @@
 """Scene preparation: scene folder -> `collision_mesh.ply` -> `navmesh.npz`, cached and idempotent.
 
-Each artefact gets a JSON sidecar (`collision_mesh.json`, `navmesh.json`) holding the hash of the
-settings that produced it, the inputs it was built from and summary figures. A step is skipped
-when its output exists, is at least as new as every input, and the stored hash matches the
-current settings, so re-running `prepare` is free and changing one setting rebuilds only what
-depends on it. All files are written atomically (`wanderland_nav.atomic`).
+Each artefact gets a JSON sidecar (`collision_mesh.json`, `navmesh.json`) holding one hash of the
+settings that produced it and of the *contents* of the inputs it was built from (each input's sha256
+is listed too), and summary figures. A step is skipped when its output exists, is intact, and the
+stored hash matches the current settings and input contents, so re-running `prepare` is cheap and
+changing one setting or one scan rebuilds only what depends on it. Modification times are never
+trusted: `cp -p` / `rsync -a` replace a scan and keep its old time. All files are written atomically
+(`wanderland_nav.atomic`).
 """
 
 from __future__ import annotations
@@ -26,14 +28,15 @@ from wanderland_nav.geometry import parse_up_axis
 from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
 from wanderland_nav.scene.collision import (CollisionSettings, crop_mesh_to_trajectory, extract_collision_mesh,
                                             load_collision_mesh)
-from wanderland_nav.scene.loader import load_scene
+from wanderland_nav.scene.loader import load_scene, visible_files
 from wanderland_nav.scene.types import Scene
 
 log = logging.getLogger(__name__)
 
 COLLISION_MESH = "collision_mesh.ply"
 NAVMESH = "navmesh.npz"
-_FORMAT = 2  # bump when the meaning of an artefact changes, so stale caches rebuild (2: ground sheet, lidar filter)
+_FORMAT = 3  # bump when the meaning of an artefact changes, so stale caches rebuild (2: ground sheet, lidar filter;
+# 3: keyed by input contents)
 
 
 def _sidecar(path: Path) -> Path:
@@ -45,31 +48,32 @@ def _read_sidecar(path: Path) -> dict | None:
 
 
 def scene_inputs(root: Path) -> list[Path]:
-    """Files whose change invalidates the collision mesh (points, poses, up axis)."""
+    """Files whose change invalidates the collision mesh (points, poses, up axis); hidden files are no input."""
     root = Path(root)
     cands = [root / "raw_pcd.ply", root / "scene.ply", root / "scene_meta.json", root / "transforms.json"]
     for d in (root / "sparse" / "0", root / "sparse", root / "lidar"):
-        if d.is_dir():
-            cands += [p for p in d.iterdir() if p.is_file()]
+        cands += visible_files(d)
     return sorted(p for p in cands if p.is_file())
 
 
 def _file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    with open(path, "rb") as f:  # streamed: a raw_pcd.ply can be gigabytes
+        return hashlib.file_digest(f, "sha256").hexdigest()[:16]
 
 
-def _up_to_date(output: Path, inputs: list[Path], settings_hash: str, load) -> bool:
-    """Output exists, its sidecar's settings hash matches, it is newer than every input, and it is intact:
-    its bytes hash to the sidecar's `sha256` (a few ms), or, for sidecars written before that field,
-    `load(output)` reads it. A truncated or corrupt artefact (killed copy, full disk) is rebuilt,
-    never called up to date."""
+def input_digests(root: Path, inputs: list[Path]) -> dict[str, str]:
+    """`{path relative to the scene folder: sha256[:16]}` of each input (what the cache key is made of)."""
+    return {p.relative_to(root).as_posix(): _file_digest(p) for p in inputs}
+
+
+def _up_to_date(output: Path, settings_hash: str, load) -> bool:
+    """Output exists, its sidecar's hash (settings and input contents) matches, and it is intact: its bytes
+    hash to the sidecar's `sha256` (a few ms), or, for sidecars written before that field, `load(output)`
+    reads it. A truncated or corrupt artefact (killed copy, full disk) is rebuilt, never called up to date."""
     if not output.is_file():
         return False
     side = _read_sidecar(output)
     if side is None or side.get("settings_hash") != settings_hash:
-        return False
-    t_out = output.stat().st_mtime
-    if not all(p.stat().st_mtime <= t_out for p in inputs):
         return False
     if "sha256" in side:
         if side["sha256"] == _file_digest(output):
@@ -92,10 +96,12 @@ def capture_positions(scene: Scene) -> np.ndarray:
 
 def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bool = False) -> tuple[Path, dict]:
     """Write `collision_mesh.ply` (+ sidecar) for `scene` unless up to date. Returns (path, sidecar)."""
-    out = scene.root / COLLISION_MESH
+    out = scene.products / COLLISION_MESH
     inputs = scene_inputs(scene.root)
-    h = json_digest({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis})
-    if not force and _up_to_date(out, inputs, h, load_collision_mesh):
+    digests = input_digests(scene.root, inputs)
+    h = json_digest({"format": _FORMAT, "settings": settings.result_dict(), "up_axis": scene.up_axis,
+                     "inputs": digests})
+    if not force and _up_to_date(out, h, load_collision_mesh):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
@@ -115,7 +121,7 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
     with atomic_path(out) as tmp:
         mesh.export(tmp, file_type="ply")
     side = {"settings_hash": h, "sha256": _file_digest(out), "settings": settings.as_dict(), "up_axis": scene.up_axis,
-            "inputs": [p.name for p in inputs], "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
+            "inputs": digests, "faces": int(len(mesh.faces)), "vertices": int(len(mesh.vertices)),
             "points_in": meta["points_in"], "points_kept": meta["points_kept"], "grid_shape": meta["grid_shape"],
             "timings": {**meta["timings"], "write_s": time.perf_counter() - t0 - meta["timings"]["total_s"]},
             "ground_fill": meta.get("ground_fill"), "lidar_filter": scene.meta.get("lidar_filter"), "skipped": False}
@@ -132,11 +138,13 @@ def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tup
         log.info("navmesh up_axis %s replaced by the scene's %s (%s)", settings.up_axis, scene.up_axis,
                  scene.up_axis_source)
         settings = dataclasses.replace(settings, up_axis=scene.up_axis)
-    cm = scene.root / COLLISION_MESH
-    out = scene.root / NAVMESH
+    cm = scene.products / COLLISION_MESH
+    out = scene.products / NAVMESH
     cm_side = _read_sidecar(cm) or {}
-    h = json_digest({"format": _FORMAT, "bake": settings.bake_hash(), "collision": cm_side.get("settings_hash")})
-    if not force and _up_to_date(out, [cm], h, NavMesh.load):
+    # the collision mesh's own bytes, not its sidecar: a mesh replaced by hand keeps the sidecar it found
+    h = json_digest({"format": _FORMAT, "bake": settings.bake_hash(),
+                     "collision": _file_digest(cm) if cm.is_file() else None})
+    if not force and _up_to_date(out, h, NavMesh.load):
         log.info("%s is up to date", out)
         side = _read_sidecar(out)
         side["skipped"] = True
@@ -171,8 +179,8 @@ def check_navmesh_frame(scene: Scene) -> None:
     navmesh, an up axis changed in scene_meta.json after prepare): its floors would be walls. Checked where a
     scene is prepared or its artefacts are taken as they are, so the error names the file and both axes here,
     not deep inside the episode sampler. Unreadable files are left to `NavMesh.load` to report."""
-    path = scene.root / NAVMESH
-    if not path.is_file():
+    path = scene.navmesh_path
+    if path is None or not Path(path).is_file():
         return
     try:
         with np.load(path, allow_pickle=False) as z:

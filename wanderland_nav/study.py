@@ -24,6 +24,7 @@ from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import StudyConfig, study_config
 from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
 from wanderland_nav.compose.study_report import write_study_outputs
+from wanderland_nav.compose.cli import quote_overrides
 from wanderland_nav.train import run as train_run
 
 
@@ -66,4 +67,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
     main()

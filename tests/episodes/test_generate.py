@@ -126,8 +126,9 @@ def test_goal_images_face_the_last_segment(demo, tmp_path):
     st = GeneratorSettings(sampler=SamplerSettings(batch_size=64), goal_image_width=32, goal_image_height=24)
     eps, _ = write_scene_episodes(scene, nm, tmp_path / "episodes.json", num_episodes=1, seed=5, settings=st)
     assert len(eps) == 1
+    key = load_episode_file(tmp_path / "episodes.json").extras["generator"]["args_hash"]
     for e in eps:
-        assert e.extras["goal_image"] == f"goal_images/{e.episode_id:05d}.png"
+        assert e.extras["goal_image"] == f"goal_images/{key}/{e.episode_id:05d}.png"  # one folder per set
         img = np.asarray(Image.open(tmp_path / e.extras["goal_image"]))
         assert img.shape == (24, 32, 3)
         assert img.std() > 5.0  # not a blank frame: the splats are in view

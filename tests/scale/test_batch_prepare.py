@@ -57,6 +57,20 @@ def test_a_prepare_only_job_is_covered_by_an_earlier_full_job_with_the_same_prep
     assert (tmp_path / "s1" / "calls").read_text() == "2"
 
 
+def test_a_scene_whose_inputs_changed_is_redone_whatever_their_times(tmp_path):
+    manifest = tmp_path / "done.json"
+    (tmp_path / "s1" / "lidar").mkdir(parents=True)
+    scan = tmp_path / "s1" / "lidar" / "000000.bin"
+    scan.write_bytes(b"\x00" * 16)
+    run_batch(jobs(tmp_path, ["s1"]), manifest, backend="serial", fn=fake_work)
+    assert run_batch(jobs(tmp_path, ["s1"]), manifest, backend="serial", fn=fake_work).skipped == ["s1"]
+    old = scan.stat()
+    scan.write_bytes(b"\x01" * 16)  # replaced as `cp -p` / `rsync -a` do: new bytes, the old time
+    os.utime(scan, ns=(old.st_atime_ns, old.st_mtime_ns))
+    assert run_batch(jobs(tmp_path, ["s1"]), manifest, backend="serial", fn=fake_work).skipped == []
+    assert (tmp_path / "s1" / "calls").read_text() == "2"
+
+
 def test_process_backend_runs_in_worker_processes(tmp_path):
     r = run_batch(jobs(tmp_path, ["a", "b"]), tmp_path / "d.json", workers=2, backend="process", fn=fake_work)
     assert os.getpid() not in {d["pid"] for d in r.done.values()}

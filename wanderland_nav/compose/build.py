@@ -65,7 +65,7 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
     if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
         from wanderland_nav.envs.episode_table import load_goal_images
 
-        goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, Path(scene.root)], env_cfg.camera.height,
+        goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, scene.products, Path(scene.root)], env_cfg.camera.height,
                                        env_cfg.camera.width, where=where)
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
                    batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)

@@ -3,10 +3,15 @@
 Why: `scene` is a Hydra config group, which rejects a path; a value that names no `conf/scene/`
 option becomes `scene=folder scene.path=<value>`, in all entry points alike. A list (several
 scenes, `make_episodes` only) goes to the entry point's `list_key`.
+
+Paths: Hydra's override lexer refuses non-ASCII letters, spaces before `(` and similar in an unquoted
+value (`scene.path=/data/café (1)`). `quote_overrides` quotes such a value for Hydra (`key='...'`), so
+any path a shell passes works; a value that still cannot be read is refused with the quoted spelling.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -17,8 +22,48 @@ CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 OmegaConf.register_new_resolver("basename", lambda p: Path(str(p)).name, replace=True)
 
 
+def hydra_quoted(value: str) -> str:
+    """`value` as a single-quoted Hydra string: quotes escaped, and the backslashes before a quote or at the
+    end doubled (Hydra keeps every other backslash as it is: `C:\\data` stays one backslash each)."""
+    return "'" + re.sub(r"(\\*)('|$)", lambda m: m.group(1) * 2 + ("\\'" if m.group(2) else ""), value) + "'"
+
+
+def quote_overrides(argv: list[str]) -> list[str]:
+    """Each `key=value` (flags such as `--multirun` pass as they are) Hydra's lexer cannot read is passed quoted (`key='value'`) when that reads back as
+    exactly `value`; otherwise a ValueError says how to quote it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import OverrideParseException
+
+    parser = OverridesParser.create()
+
+    def reads(override: str) -> str | None:  # None when Hydra parses it, else its first error line
+        try:
+            parser.parse_overrides([override])
+            return None
+        except OverrideParseException as e:
+            return str(e).strip().splitlines()[0]
+
+    out = []
+    for arg in argv:
+        if arg.startswith("-") or "=" not in arg:  # Hydra's own flags (--multirun, --cfg job): not overrides
+            out.append(arg)
+            continue
+        error = reads(arg)
+        key, _, value = arg.partition("=")
+        quoted = f"{key}={hydra_quoted(value)}"
+        if error is None or (value[:1] not in ("[", "{", "'", '"') and reads(quoted) is None):
+            out.append(arg if error is None else quoted)
+            continue
+        if value.startswith("["):  # a list: each element is quoted on its own
+            quoted = f"{key}=[" + ", ".join(hydra_quoted(v.strip()) for v in value.strip("[]").split(",")) + "]"
+        raise ValueError(f"{arg}: Hydra cannot read this override ({error}); quote the path: {quoted} "
+                         f"(in a shell, around the whole argument: \"{quoted}\")")
+    return out
+
+
 def scene_overrides(argv: list[str], *, list_key: str | None = None, conf_dir: Path = CONF_DIR) -> list[str]:
-    """`scene=X` -> `scene=folder scene.path=X` unless X is a conf/scene/ option; `scene=[..]` -> `<list_key>=[..]`."""
+    """`scene=X` -> `scene=folder scene.path=X` unless X is a conf/scene/ option; `scene=[..]` -> `<list_key>=[..]`;
+    values Hydra's lexer refuses (non-ASCII paths, `(`) are quoted (`quote_overrides`)."""
     out = []
     for arg in argv:
         if not arg.startswith("scene="):
@@ -33,7 +78,7 @@ def scene_overrides(argv: list[str], *, list_key: str | None = None, conf_dir: P
             out.append(f"{list_key}={value}")
         else:
             out += ["scene=folder", f"scene.path={value}"]
-    return out
+    return quote_overrides(out)
 
 
 def compose_config(name: str, overrides: list[str] = (), *, list_key: str | None = None):

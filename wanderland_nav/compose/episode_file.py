@@ -53,7 +53,7 @@ def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int
 
     tag = "-".join(f"{f:g}" for f in splits)
     fresh = existing is not None and not Path(existing).exists()  # no file yet: make the scene's own
-    out = Path(existing) if fresh else Path(scene.root) / f"episodes_n{num}_s{seed}_{tag}.json"
+    out = Path(existing) if fresh else scene.products / f"episodes_n{num}_s{seed}_{tag}.json"
     # point-goal training needs no goal views; rendering them costs seconds each on a CPU
     settings = GeneratorSettings(goal_images=goal_images, splits=tuple(splits))
     _, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=int(num),

@@ -69,7 +69,7 @@ def process_scene(plan: ScenePlan, *, navigation: NavigationGroup, num_episodes:
 
     scene = prepared_scene(plan.scene, navigation)
     navmesh = load_navmesh(scene)
-    out = Path(plan.out) if plan.out else Path(scene.root) / "episodes.json"
+    out = Path(plan.out) if plan.out else scene.products / "episodes.json"
     bar = tqdm(total=num_episodes, desc=scene.name, position=position, leave=True, disable=not progress,
                unit="ep", dynamic_ncols=True)
     try:

@@ -64,7 +64,7 @@ def scene_episodes(scene, path: str | None, *, num: int, seed: int, generator) -
     if scene.navmesh_path is None:
         raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
                                 f"(python -m wanderland_nav.prepare scene={scene.root})")
-    out = Path(scene.root) / "episodes.json"
+    out = scene.products / "episodes.json"
     t = time.perf_counter()
     write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), out, num_episodes=num, seed=seed, settings=generator)
     log.info("generated %d episodes -> %s (%.1fs)", num, out, time.perf_counter() - t)

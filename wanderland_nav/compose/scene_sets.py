@@ -77,7 +77,7 @@ def _scene_env(paths: dict[str, str], env_cfg: NavEnvConfig, split, device: str,
                sub_batch: int, seed: int):
     """One scene's `NavEnv` over its own navmesh, level-of-detail Gaussians and `episodes.json`."""
     scene = load_scene(paths[scene_id])
-    return env_factory(scene, Path(scene.root) / "episodes.json", env_cfg, split=split, batch_size=sub_batch, seed=seed,
+    return env_factory(scene, scene.products / "episodes.json", env_cfg, split=split, batch_size=sub_batch, seed=seed,
                        device=device, navmesh=load_navmesh(scene),
                        gaussians=scene_gaussians(scene, lod_px, needed=env_cfg.camera.enabled))()
 

@@ -5,7 +5,9 @@ with the key named (`Key 'widht' not in 'CameraConfig' / full_key: env.camera.wi
 falling back to a default. The library dataclasses (`NavEnvConfig`, `CollisionSettings`,
 `NavMeshSettings`, `BCConfig`, `PPOConfig`, `GeneratorSettings`, `FitConfig`) are used as they
 are, so there is no second, hand-written copy of their fields. `typed_config` is the one
-conversion; OmegaConf checks keys and types, the dataclasses' own `__post_init__` checks ranges.
+conversion; OmegaConf checks keys and types, `at_least` / `above` on this module's fields check ranges
+naming the full key (`train_env.batch_size=0: must be >= 1`), and the library dataclasses' own
+`__post_init__` checks theirs (the error then names the config key of the class that refused).
 
 The `policy` node stays a plain mapping: each architecture has its own fields and
 `policies.make_policy` rejects unknown ones with the field named.
@@ -14,6 +16,7 @@ The `policy` node stays a plain mapping: each architecture has its own fields an
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -30,6 +33,30 @@ from wanderland_nav.rl.ppo import PPOConfig
 from wanderland_nav.scene.collision import CollisionSettings
 
 
+# ------------------------------------------------------------------------------ ranges
+
+
+def at_least(low: float, default, *, strict: bool = False):
+    """A field whose value (when not null) must be >= `low` (> `low` with `strict`); checked by `typed_config`."""
+    return field(default=default, metadata={"min": low, "strict": strict})
+
+
+def above(low: float, default):
+    return at_least(low, default, strict=True)
+
+
+def _check_ranges(obj, prefix: str = "") -> None:
+    """Every `at_least` / `above` field of `obj` and its nested dataclasses, with the full key in the error."""
+    for f in dataclasses.fields(obj):
+        value, key = getattr(obj, f.name), f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            _check_ranges(value, key + ".")
+        elif "min" in f.metadata and value is not None:
+            low, strict = f.metadata["min"], f.metadata["strict"]
+            if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
+                raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
+
+
 # ------------------------------------------------------------------------------ shared groups
 @dataclass
 class SceneSetSettings:
@@ -43,9 +70,9 @@ class SceneSetSettings:
     data_root: Optional[str] = None  # list/CSV paths resolve against it (null: the manifest's folder)
     tiers: Optional[List[str]] = None  # CSV quality tiers kept (null: all)
     split: Optional[str] = None  # manifest split kept (null: all)
-    num_active: Optional[int] = None  # scenes stepped at once (null: most that split train_env.batch_size evenly)
-    memory_budget_gb: Optional[float] = None  # LRU budget for loaded scenes per env (null: keep all)
-    prepare_workers: int = 2  # scenes prepared in parallel
+    num_active: Optional[int] = at_least(1, None)  # scenes stepped at once (null: most that split train_env.batch_size evenly)
+    memory_budget_gb: Optional[float] = above(0, None)  # LRU budget for loaded scenes per env (null: keep all)
+    prepare_workers: int = at_least(1, 2)  # scenes prepared in parallel
     backend: str = "process"  # process (local pool) | ray (Ray tasks; RAY_ADDRESS joins a cluster) | auto | serial
 
     def __post_init__(self):
@@ -105,9 +132,9 @@ class AlgoGroup:
 @dataclass
 class LoggerGroup:
     kind: str = "console"  # console | rerun
-    print_every: int = 1  # console
-    rollout_every: int = 5  # rerun
-    max_agents: int = 2  # rerun
+    print_every: int = at_least(1, 1)  # console
+    rollout_every: int = at_least(0, 5)  # rerun (0: never)
+    max_agents: int = at_least(1, 2)  # rerun
     spawn: bool = False  # rerun
 
 
@@ -117,11 +144,11 @@ class CollectorGroup:
     `kind: ray`, `num_workers` TorchRL Ray collectors (`rl/ray_collector.py`), one machine or a cluster."""
 
     kind: str = "local"  # local | ray
-    num_workers: int = 1
+    num_workers: int = at_least(1, 1)
     address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
-    cpus_per_worker: float = 1.0  # ray
-    memory_per_worker_gb: Optional[float] = None  # ray
-    sync_timeout_s: float = 600.0  # ray: how long the weight sync waits for a worker to join (TorchRL: 60 s)
+    cpus_per_worker: float = above(0, 1.0)  # ray
+    memory_per_worker_gb: Optional[float] = above(0, None)  # ray
+    sync_timeout_s: float = above(0, 600.0)  # ray: how long the weight sync waits for a worker to join (TorchRL: 60 s)
     worker_niceness: Optional[int] = 0  # ray: collector processes' niceness (null: Ray's own, 15)
 
     def __post_init__(self):
@@ -140,11 +167,11 @@ class CollectorGroup:
 @dataclass
 class EpisodeSource:
     path: Optional[str] = None  # an episodes.json instead of <scene>/episodes.json
-    num: Optional[int] = 400  # null: the scene's own file as it is; else a sibling file with this many (compose/episode_file.py)
+    num: Optional[int] = at_least(1, 400)  # null: the scene's own file as it is; else a sibling file with this many (compose/episode_file.py)
     splits: Tuple[float, float, float] = (0.6, 0.15, 0.25)  # train / val / test fractions
     seed: int = 0
     goal_images: bool = False
-    ppo_routes: int = 0  # PPO also trains on this many more routes (a train-only file drawn with ppo_routes_seed)
+    ppo_routes: int = at_least(0, 0)  # PPO also trains on this many more routes (a train-only file drawn with ppo_routes_seed)
     ppo_routes_seed: int = 1  # must differ from `seed`: the same seed would redraw the val/test routes
 
 
@@ -159,15 +186,15 @@ class RenderSettings:
 
 @dataclass
 class TrainEnvSettings:
-    batch_size: int = 8
+    batch_size: int = at_least(1, 8)
     split: Optional[str] = "train"
 
 
 @dataclass
 class EvalSettings:
     split: Optional[str] = "val"
-    episodes: Optional[int] = None
-    batch_size: int = 10
+    episodes: Optional[int] = at_least(1, None)
+    batch_size: int = at_least(1, 10)
     deterministic: bool = True
     sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
 
@@ -184,13 +211,13 @@ class TrainConfig:
     exp_name: str = "run"
     seed: int = 0
     device: str = "cpu"
-    threads: Optional[int] = None
+    threads: Optional[int] = at_least(1, None)
     progress: bool = True
     run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
     init_checkpoint: Optional[str] = None
     demo_preset: str = "tiny"
     goal_input: str = "route"  # route | goal (rl/route_goal.py)
-    route_lookahead: float = 3.0
+    route_lookahead: float = above(0, 3.0)
     save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
     episodes: EpisodeSource = field(default_factory=EpisodeSource)
     render: RenderSettings = field(default_factory=RenderSettings)
@@ -208,11 +235,11 @@ class EvaluateConfig:
     expert_path_source: str = "reference"  # expert: episode's reference_path | navmesh (fresh find_path)
     render_for_reference: bool = False  # the references never look; true renders anyway
     episodes: Optional[str] = None
-    demo_episodes: int = 60
+    demo_episodes: int = at_least(1, 60)
     split: Optional[str] = None
-    num_episodes: Optional[int] = None
+    num_episodes: Optional[int] = at_least(1, None)
     checkpoints: Optional[List[str]] = None
-    batch_size: int = 8
+    batch_size: int = at_least(1, 8)
     device: str = "cpu"
     seed: int = 0
     out: Optional[str] = None
@@ -228,7 +255,7 @@ class PrepareConfig:
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
     force: bool = False
     navmesh_enabled: bool = True
-    workers: Optional[int] = None  # a scene set: scenes prepared at once (null: scene.set.prepare_workers)
+    workers: Optional[int] = at_least(1, None)  # a scene set: scenes prepared at once (null: scene.set.prepare_workers)
 
 
 @dataclass
@@ -236,11 +263,11 @@ class MakeEpisodesConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
     scenes: Optional[List[str]] = None  # several scenes / a folder of scenes (scene=[a,b])
-    num_episodes: int = 100
+    num_episodes: int = at_least(1, 100)
     seed: int = 0
     out: Optional[str] = None
     force: bool = False
-    workers: Optional[int] = None
+    workers: Optional[int] = at_least(1, None)
     scenes_root: str = "data/scenes"
     topdown: bool = True
     progress: bool = True
@@ -258,15 +285,15 @@ class ReplayConfig:
     frames: str = "auto"  # auto | render | none
     lod_px: Optional[float] = DEFAULT_LOD_PX  # as train's render.lod_px (the same camera); null: every Gaussian
     agents: Optional[List[int]] = None
-    max_episodes: int = 8
-    max_points: int = 50000
-    max_cameras: int = 32
-    frame_chunk: int = 64
+    max_episodes: int = at_least(1, 8)
+    max_points: int = at_least(1, 50000)
+    max_cameras: int = at_least(0, 32)
+    frame_chunk: int = at_least(1, 64)
     device: str = "cpu"
     camera: CameraConfig = field(default_factory=CameraConfig)
-    num_waypoints: int = 5
-    path_stride: int = 1
-    control_period: float = 0.5
+    num_waypoints: int = at_least(1, 5)
+    path_stride: int = at_least(1, 1)
+    control_period: float = above(0, 0.5)
 
 
 @dataclass
@@ -281,12 +308,12 @@ class FitRunConfig:
     out_dir: Optional[str] = None  # null: outputs/fit/<scene>/<run identity hash>
     resume: bool = True
     evaluate: bool = True
-    eval_max_views: Optional[int] = 24
+    eval_max_views: Optional[int] = at_least(1, 24)
     export_to_scene: bool = False
-    log_every: int = 50
+    log_every: int = at_least(1, 50)
     rerun: bool = False
     progress: bool = True
-    threads: Optional[int] = None
+    threads: Optional[int] = at_least(1, None)
     lpips: LpipsPaths = field(default_factory=LpipsPaths)
     fit: FitConfig = field(default_factory=FitConfig)
 
@@ -307,19 +334,19 @@ class ReconEvalConfig:
     pred: Optional[str] = None
     gt: Optional[str] = None
     name: Optional[str] = None
-    max_time_diff: float = 0.01
+    max_time_diff: float = at_least(0, 0.01)
     time_offset: float = 0.0
-    rpe_delta: int = 1
-    collinear_tol: float = 1e-9
-    chunk_pairs: int = 65536
+    rpe_delta: int = at_least(1, 1)
+    collinear_tol: float = at_least(0, 1e-9)
+    chunk_pairs: int = at_least(1, 65536)
     device: str = "cpu"
     out: Optional[str] = None
     plot: bool = True
     rerun: bool = True
     nvs: Optional[str] = None
     nvs_split: str = "val"
-    nvs_holdout_every: int = 8
-    nvs_downscale: float = 1.0
+    nvs_holdout_every: int = at_least(1, 8)
+    nvs_downscale: float = above(0, 1.0)
     lpips: LpipsPaths = field(default_factory=LpipsPaths)
 
 
@@ -356,7 +383,29 @@ def typed_config(cfg: DictConfig | dict, schema: type):
     """The composed config as `schema`'s dataclasses; an unknown key or a wrong type raises with its
     full key (`env.camera.widht`), a range error with the dataclass field (from `__post_init__`)."""
     node = _writable(OmegaConf.structured(schema))
-    return _tuples(OmegaConf.to_object(OmegaConf.merge(node, cfg)))
+    merged = OmegaConf.merge(node, cfg)
+    try:
+        obj = _tuples(OmegaConf.to_object(merged))
+    except ValueError as e:  # a library dataclass's own range check names its class: add the config key
+        where = _config_keys_of(schema).get(str(e).split(":")[0].split(".")[0].split(" ")[0])
+        raise ValueError(f"{e} (config key: {where})" if where else str(e)) from None
+    _check_ranges(obj)
+    return obj
+
+
+def _config_keys_of(schema: type, prefix: str = "") -> dict[str, str]:
+    """{dataclass name (and its bases'): the config key where it sits} for every nested dataclass field."""
+    import typing
+
+    out: dict[str, str] = {}
+    hints = typing.get_type_hints(schema)
+    for f in dataclasses.fields(schema):
+        t = hints.get(f.name)
+        if dataclasses.is_dataclass(t):
+            for base in t.__mro__:
+                out.setdefault(base.__name__, prefix + f.name)
+            out.update({k: v for k, v in _config_keys_of(t, f"{prefix}{f.name}.").items() if k not in out})
+    return out
 
 
 def _tuples(obj):

@@ -112,7 +112,7 @@ class StudyCells:
             tag = hashlib.sha256(json.dumps([settings.to_dict(), t.episodes.num, t.episodes.seed],
                                             sort_keys=True).encode()).hexdigest()[:8]
             _, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
-                                              Path(scene.root) / f"episodes_study_{tag}.json",
+                                              scene.products / f"episodes_study_{tag}.json",
                                               num_episodes=t.episodes.num, seed=t.episodes.seed, settings=settings)
             log.info("%s episodes (study.episode_sampler %s): %s, %d kept %s", env, overrides, summary.out,
                      summary.kept, summary.splits)
@@ -151,7 +151,7 @@ class StudyCells:
         if t.episodes.path is not None:  # study.episode_sampler's file, used as it is (as `train` does)
             scene.episodes_path = Path(t.episodes.path)
             return scene, Path(t.episodes.path), t
-        own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
+        own = scene.episodes_path if scene.episodes_path is not None else scene.products / "episodes.json"
         path = episodes_for_run(scene, Path(own), num=t.episodes.num, seed=t.episodes.seed,
                                 splits=tuple(t.episodes.splits), goal_images=t.episodes.goal_images)
         return scene, path, t

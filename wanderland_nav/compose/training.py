@@ -52,7 +52,7 @@ def _single_scene(c: TrainConfig):
         scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                               generator=GeneratorSettings(goal_images=c.episodes.goal_images))
     else:  # episodes.num is honoured: the scene's file when it matches, else a generated sibling file
-        own = scene.episodes_path if scene.episodes_path is not None else Path(scene.root) / "episodes.json"
+        own = scene.episodes_path if scene.episodes_path is not None else scene.products / "episodes.json"
         episodes_path = episodes_for_run(scene, Path(own), num=c.episodes.num, seed=c.episodes.seed,
                                          splits=tuple(c.episodes.splits), goal_images=c.episodes.goal_images)
         scene.episodes_path = episodes_path

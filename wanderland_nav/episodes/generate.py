@@ -22,7 +22,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from wanderland_nav.atomic import atomic_dir
 from wanderland_nav.cache import json_digest
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.episodes.goal_images import render_goal_images
 from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
 from wanderland_nav.episodes.paths import first_heading_nav, last_heading_nav, polyline_length, resample_polyline
@@ -161,9 +163,10 @@ def _dense_expert_locations(scene, navmesh, paths, R_ns: np.ndarray,
     counts = np.array([len(d) for d in dense], dtype=np.int64)
     flat = np.concatenate(dense, 0) if E else np.zeros((0, 3))
     if len(flat):
-        # heights from the navmesh surface: the linear interpolation between corners is on the mesh
-        # horizontally (the funnel path stays inside its corridor) but not vertically on slopes
-        flat = np.asarray(navmesh.snap_point(flat, max_distance=1e9), dtype=np.float64)
+        # heights from the navmesh floor under each sample, xy kept: the linear interpolation between corners
+        # is on the mesh horizontally (the funnel path stays inside its corridor) but not vertically on slopes
+        # and steps; a 3D-nearest snap would pull samples beside a step onto its edge (bunched, then a gap)
+        flat = np.asarray(navmesh.floor_points(flat), dtype=np.float64)
         indoor_flat = np.asarray(scene.is_indoor(flat), dtype=bool).reshape(-1)
     else:
         indoor_flat = np.zeros(0, dtype=bool)
@@ -200,14 +203,23 @@ def _point_goal_polar(pairs, R_ns: np.ndarray, yaw0: np.ndarray) -> tuple[np.nda
 def _goal_images(scene, sampler: EndpointSampler, geo: _RouteGeometry, R_ns: np.ndarray,
                  settings: GeneratorSettings, goal_image_dir: Path) -> list[Path | None]:
     """Render one goal view per episode (at the goal, facing along the last path segment) into
-    `goal_image_dir/<i:05d>.png`; -> the E written paths. Caller checks that images are wanted."""
+    `goal_image_dir/<i:05d>.png`; -> the E written paths. Caller checks that images are wanted.
+
+    The folder is written as one set (`atomic_dir`): a killed run leaves the earlier set or none, never
+    some new views beside old ones."""
     E = len(geo.corners)
+    if scene.gaussians_path is None:  # a LiDAR-only scene: episodes are valid, they just carry no goal view
+        log.warning("no 3dgs.ply in the scene: %d goal image(s) skipped (episodes get no goal_image)", E)
+        return [None] * E
     height = settings.goal_camera_height or float(np.clip(np.median(sampler.camera_heights), 0.3, 3.0))
-    return render_goal_images(
-        scene.gaussians_path, np.stack([c[-1] for c in geo.corners_nav]), geo.yaw_goal, R_ns,
-        [goal_image_dir / f"{i:05d}.png" for i in range(E)], height=height,
-        width=settings.goal_image_width, image_height=settings.goal_image_height,
-        hfov_deg=settings.goal_image_hfov_deg, lod_px=settings.goal_image_lod_px, device=settings.render_device)
+    names = [f"{i:05d}.png" for i in range(E)]
+    with atomic_dir(goal_image_dir) as tmp:
+        render_goal_images(
+            scene.gaussians_path, np.stack([c[-1] for c in geo.corners_nav]), geo.yaw_goal, R_ns,
+            [tmp / n for n in names], height=height,
+            width=settings.goal_image_width, image_height=settings.goal_image_height,
+            hfov_deg=settings.goal_image_hfov_deg, lod_px=settings.goal_image_lod_px, device=settings.render_device)
+    return [goal_image_dir / n for n in names]
 
 
 def _instruction_texts(scene, instructions: InstructionGenerator, geo: _RouteGeometry, dense, indoor,
@@ -227,7 +239,7 @@ def _instruction_texts(scene, instructions: InstructionGenerator, geo: _RouteGeo
 
 
 def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, splits: list[str], rho, phi,
-                       goal_paths: list[Path | None], goal_image_dir: Path | None, texts: list[str],
+                       goal_paths: list[Path | None], goal_image_base: Path | None, texts: list[str],
                        dec: int) -> list[Episode]:
     """Build and validate the `Episode` records (every written number rounded to `dec` places)."""
     episodes = []
@@ -240,7 +252,7 @@ def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, splits: list[st
             "point_goal_polar": [round(float(rho[i]), dec), round(float(phi[i]), 6)],
         }
         if goal_paths[i] is not None:
-            extras["goal_image"] = f"{goal_image_dir.name}/{goal_paths[i].name}"
+            extras["goal_image"] = goal_paths[i].relative_to(goal_image_base).as_posix()
         ep = Episode(
             episode_id=i, scene_id=scene.name,
             start_position=geo.corners[i][0], start_rotation_wxyz=geo.q_wxyz[i],
@@ -258,13 +270,13 @@ def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, splits: list[st
 def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
                       settings: GeneratorSettings | None = None,
                       instructions: InstructionGenerator | None = None,
-                      goal_image_dir: Path | None = None,
+                      goal_image_dir: Path | None = None, goal_image_base: Path | None = None,
                       progress: Callable[[int], None] | None = None) -> tuple[list[Episode], GenerationSummary]:
     """Sample `num_episodes` expert episodes on `navmesh` for `scene` (a `Scene`).
 
-    Goal images are rendered into `goal_image_dir` (named `<episode_id:05d>.png`; the episode's
-    `goal_image` extra is the path relative to the folder above it) when it is given and
-    `settings.goal_images` is on. `progress(n)` is called as episodes are accepted.
+    Goal images are rendered into `goal_image_dir` (named `<episode_id:05d>.png`, replacing the folder
+    as one set; the episode's `goal_image` extra is the path relative to `goal_image_base`, by default
+    the folder above it) when it is given and `settings.goal_images` is on. `progress(n)` is called as episodes are accepted.
     Returns fewer episodes than asked if the sampler runs out of rounds (the summary says why).
     """
     settings = settings or GeneratorSettings()
@@ -290,7 +302,9 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
         goal_paths = _goal_images(scene, sampler, geo, R_ns, settings, goal_image_dir)
 
     texts = _instruction_texts(scene, instructions, geo, dense, indoor, R_ns, goal_paths, seed)
-    episodes = _assemble_episodes(scene, pairs, geo, dense, splits, rho, phi, goal_paths, goal_image_dir,
+    base = Path(goal_image_base) if goal_image_base is not None else \
+        Path(goal_image_dir).parent if goal_image_dir is not None else None
+    episodes = _assemble_episodes(scene, pairs, geo, dense, splits, rho, phi, goal_paths, base,
                                   texts, settings.decimals)
 
     rej = {r: int(pairs.rejections.get(r, 0)) for r in REJECTION_REASONS}
@@ -325,24 +339,50 @@ def navmesh_fingerprint(navmesh_path: Path | None) -> str:
     return h.hexdigest()
 
 
+def splat_fingerprint(scene, settings: GeneratorSettings) -> str:
+    """sha256 of `3dgs.ply` when goal views are rendered from it ("none" otherwise): a changed splat
+    changes every goal view, so it is part of the episodes' key."""
+    path = getattr(scene, "gaussians_path", None)
+    if not settings.goal_images or path is None or not Path(path).is_file():
+        return "none"
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
 def args_hash(scene_name: str, num_episodes: int, seed: int, settings: GeneratorSettings,
-              instruction_source: str, navmesh_hash: str) -> str:
+              instruction_source: str, navmesh_hash: str, splat_hash: str = "none") -> str:
     payload = {"format": FORMAT_VERSION, "scene": scene_name, "num_episodes": int(num_episodes), "seed": int(seed),
-               "settings": settings.to_dict(), "instructions": instruction_source, "navmesh": navmesh_hash}
+               "settings": settings.to_dict(), "instructions": instruction_source, "navmesh": navmesh_hash,
+               "splat": splat_hash}
     return json_digest(payload)
 
 
+def goal_images_digest(root: Path, episodes) -> str | None:
+    """One hash over every goal view the episodes name (their bytes, in episode order); None when one is
+    missing or none is named."""
+    h = hashlib.sha256()
+    named = [e.extras["goal_image"] for e in episodes if "goal_image" in e.extras]
+    for name in named:
+        p = root / name
+        if not p.is_file():
+            return None
+        h.update(name.encode()); h.update(hashlib.sha256(p.read_bytes()).digest())
+    return h.hexdigest()[:16] if named else None
+
+
 def _up_to_date(out: Path, digest: str) -> list[Episode] | None:
-    """The episodes of `out` if it was written with the same args hash and its goal images exist."""
+    """The episodes of `out` if it was written with the same args hash and its goal views are the ones
+    it was written with (same bytes), so a view replaced or left by another run is never taken."""
     if not out.is_file():
         return None
     try:
         f = load_episode_file(out)
     except (EpisodeFormatError, OSError):
         return None
-    if f.extras.get("generator", {}).get("args_hash") != digest:
+    gen = f.extras.get("generator", {})
+    if gen.get("args_hash") != digest:
         return None
-    if any("goal_image" in e.extras and not (out.parent / e.extras["goal_image"]).is_file() for e in f.episodes):
+    if goal_images_digest(out.parent, f.episodes) != gen.get("goal_images_digest"):
         return None
     return f.episodes
 
@@ -380,6 +420,62 @@ def episodes_target(out: Path, *, force: bool) -> Path:
     return target
 
 
+class EmptyEpisodeSetError(WanderlandInputError):
+    """No episode survived: nothing is written (an empty episodes file would train and evaluate on nothing)."""
+
+
+#: what to change when one rejection reason took every candidate (the navmesh, not the sampler, is the
+#: usual cause: an agent radius that erodes every walkway leaves only crumbs off which nothing reaches)
+_REMEDY = {
+    "off_mesh": "the drawn points fall off the navmesh",
+    "not_near_camera": "no navmesh lies within generator.sampler.camera_radius of a capture camera",
+    "different_island": "start and goal never share a navmesh island",
+    "unreachable": "the planner finds no path between candidates",
+    "too_short": "no route reaches generator.sampler.min_geodesic",
+    "too_long": "every route exceeds generator.sampler.max_geodesic",
+}
+
+
+def _why_no_episodes(scene, navmesh, summary: GenerationSummary | None, settings: GeneratorSettings,
+                     requested: int) -> str:
+    """One sentence with the navmesh's figures and the rejection that dominated (summary None: nothing was
+    drawn, the navmesh has no walkable area)."""
+    islands = sorted(navmesh.islands, key=lambda i: -i.area)
+    ns = navmesh.settings
+    nav = (f"the navmesh has {len(islands)} island(s), {navmesh.area:.1f} m^2 walkable"
+           + (f", the largest {islands[0].area:.1f} m^2 reaching {islands[0].radius:.1f} m from its centre"
+              if islands else "") + f" (agent_radius {ns.agent_radius:g} m, agent_max_climb {ns.agent_max_climb:g} m)")
+    rej = summary.rejections if summary is not None else {}
+    top = max(rej, key=rej.get) if any(rej.values()) else None
+    why = (f"{_REMEDY.get(top, top)} ({top}: {rej[top]} of {summary.candidates} candidates)" if top else
+           f"{summary.candidates} candidates were drawn" if summary is not None else "no walkable area to draw from")
+    return (f"0 of {requested} episodes for scene {scene.name!r}, nothing written: {why}; {nav}. "
+            "Small or scattered islands come from an agent radius too large for the walkways "
+            "(navigation.navmesh.agent_radius) or a collision mesh without ground; else loosen generator.sampler "
+            f"(camera_radius {settings.sampler.camera_radius:g}, min_geodesic {settings.sampler.min_geodesic:g})")
+
+
+def _image_set(out: Path) -> Path | None:
+    """The goal-view folder the episodes file at `out` names now (None: no file, no views, not ours)."""
+    if not written_by_us(out):
+        return None
+    names = [e.extras["goal_image"] for e in load_episode_file(out).episodes if "goal_image" in e.extras]
+    return (out.parent / names[0]).parent if names else None
+
+
+def _drop_unused_image_set(out: Path, folder: Path | None, *, keep: Path) -> None:
+    """Remove the views an earlier version of `out` used, unless another episodes file beside it names them."""
+    import shutil
+
+    if folder is None or folder == keep or not folder.is_dir() or folder.parent.parent != out.parent:
+        return
+    for other in out.parent.glob("*.json*"):
+        if other != out and written_by_us(other) and _image_set(other) == folder:
+            return
+    shutil.rmtree(folder)
+    log.info("%s: removed %s (the goal views of the file's previous version)", out, folder)
+
+
 def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: int,
                          settings: GeneratorSettings | None = None,
                          instructions: InstructionGenerator | None = None, force: bool = False,
@@ -396,9 +492,11 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
     instructions = instructions or RuleBasedInstructions()
     requested = Path(out)
     out = episodes_target(requested, force=force)
-    image_dir = out.parent / ("goal_images" if out == requested else "goal_images.generated")
     digest = args_hash(scene.name, num_episodes, seed, settings, getattr(instructions, "name", type(instructions).__name__),
-                       navmesh_fingerprint(getattr(scene, "navmesh_path", None)))
+                       navmesh_fingerprint(getattr(scene, "navmesh_path", None)), splat_fingerprint(scene, settings))
+    # one folder per episode set, named by its key: two episode files beside one scene, or a run killed
+    # half-way, can never share or mix views
+    image_dir = out.parent / ("goal_images" if out == requested else "goal_images.generated") / digest
     if not force:
         existing = _up_to_date(out, digest)
         if existing is not None:
@@ -408,16 +506,22 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
                 scene=scene.name, requested=num_episodes, kept=len(existing), candidates=0, rounds=0,
                 rejections={}, length_hist=length_histogram([e.geodesic_distance for e in existing]),
                 splits=split_counts, skipped=True, out=str(out))
+    if num_episodes > 0 and navmesh.area <= 0:
+        raise EmptyEpisodeSetError(_why_no_episodes(scene, navmesh, None, settings, num_episodes), path=out)
     episodes, summary = generate_episodes(
         scene, navmesh, num_episodes=num_episodes, seed=seed, settings=settings, instructions=instructions,
-        goal_image_dir=image_dir, progress=progress)
+        goal_image_dir=image_dir, goal_image_base=out.parent, progress=progress)
     extras = {
         "generator": {"name": GENERATOR_NAME, "format": FORMAT_VERSION, "args_hash": digest,
                       "num_episodes": num_episodes, "seed": seed, "instructions": instructions.name,
-                      "settings": settings.to_dict()},
+                      "settings": settings.to_dict(), "goal_images_digest": goal_images_digest(out.parent, episodes)},
         "summary": summary.to_dict(),
     }
+    if num_episodes > 0 and not episodes:
+        raise EmptyEpisodeSetError(_why_no_episodes(scene, navmesh, summary, settings, num_episodes), path=out)
+    previous = _image_set(out)
     save_episodes(out, episodes, extras)
+    _drop_unused_image_set(out, previous, keep=image_dir)
     summary.out = str(out)
     log.info("%s: %d episodes written to %s", scene.name, len(episodes), out)
     return episodes, summary

@@ -378,7 +378,7 @@ class Trainer:
         return self.checkpoint_path
 
     def load_checkpoint(self, path: Path) -> None:
-        blob = torch_load(path, what="gsfit checkpoint", weights_only=True, map_location=self.device)
+        blob = torch_load(path, what="gsfit checkpoint", map_location=self.device)
         try:
             params = blob["params"]
             for k in PARAM_NAMES:

@@ -5,11 +5,17 @@ into place (`wanderland_nav.atomic`), so killing the run at any moment leaves th
 intact. A checkpoint holds the policy's state dict (which includes its normalisation buffers), the
 optimiser, step counters, RNG states and the resolved config, so `load + restore` resumes where the run
 stopped.
+
+Loading never runs code from the file: every load is `torch.load(weights_only=True)`, so the payload is
+plain data only (tensors, numbers, strings, lists, dicts; the numpy RNG state is stored as a tensor), and
+a file that needs anything else (a pickled class, `os.system` in a crafted file) is refused with its name
+and the global it asked for. Checkpoints are shared between people; a `.pt` is a pickle.
 """
 
 from __future__ import annotations
 
 import random
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -23,13 +29,45 @@ CHECKPOINT_VERSION = 1
 
 
 def rng_state() -> dict[str, Any]:
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    """Every RNG's state as plain data (numpy's MT19937 key as an int64 tensor, not an ndarray)."""
+    npst = np.random.get_state(legacy=False)
+    npst["state"] = {"key": torch.from_numpy(npst["state"]["key"].astype(np.int64)), "pos": int(npst["state"]["pos"])}
+    return {"torch": torch.get_rng_state(), "numpy": npst, "python": random.getstate()}
 
 
 def set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
+    npst = state["numpy"]
+    if isinstance(npst, dict):  # rng_state()'s form; a tuple is numpy's legacy form (older checkpoints)
+        inner = npst["state"]
+        npst = {**npst, "state": {"key": np.asarray(inner["key"], dtype=np.uint32), "pos": int(inner["pos"])}}
+    np.random.set_state(npst)
     random.setstate(state["python"])
+
+
+# what a checkpoint written before the RNG state became plain data needs: numeric ndarrays, nothing callable
+_LEGACY_NUMPY = (np._core.multiarray._reconstruct, np.ndarray, np.dtype, np.dtypes.UInt32DType)
+
+
+def _plain_data(value: Any, where: str = "checkpoint") -> Any:
+    """`value` as what `weights_only=True` loads back: numpy scalars become Python numbers (lossless); anything
+    else that is not plain data is refused naming its key, so a save never writes what a safe load refuses.
+    Containers come back as they are (state dicts keep their `_metadata`) unless a value in them changed."""
+    if isinstance(value, np.generic) and value.dtype.kind in "biuf":
+        return value.item()
+    if value is None or type(value) in (bool, int, float, str) or isinstance(value, (torch.Tensor, torch.Size)):
+        return value
+    if type(value) in (dict, OrderedDict):
+        bad = next((k for k in value if type(k) not in (str, int)), None)
+        if bad is not None:
+            raise TypeError(f"{where}: key {bad!r} is a {type(bad).__name__}, not plain data")
+        new = {k: _plain_data(v, f"{where}.{k}") for k, v in value.items()}
+        return value if all(new[k] is v for k, v in value.items()) else type(value)(new)
+    if type(value) in (list, tuple):
+        new = [_plain_data(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        return value if all(a is b for a, b in zip(new, value)) else type(value)(new)
+    raise TypeError(f"{where} is a {type(value).__name__}: a checkpoint holds plain data only "
+                    "(tensors, numbers, strings, lists, dicts), so it loads without running code")
 
 
 def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: torch.optim.Optimizer | None,
@@ -47,6 +85,7 @@ def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: tor
         "rng": rng_state(),
         "extra": extra or {},
     }
+    payload = _plain_data(payload)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
     return path
@@ -55,8 +94,8 @@ def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: tor
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint; missing -> FileNotFoundError, truncated/corrupt/foreign -> WanderlandInputError."""
     path = Path(path)
-    # weights_only=False: the payload holds numpy RNG state and the config dict; checkpoints are our own
-    ckpt = torch_load(path, what="checkpoint", weights_only=False)
+    with torch.serialization.safe_globals(list(_LEGACY_NUMPY)):
+        ckpt = torch_load(path, what="checkpoint")
     if not isinstance(ckpt, dict) or "policy" not in ckpt:
         raise WanderlandInputError("not a wanderland_nav checkpoint (no 'policy' field)", path=path)
     if ckpt.get("version") != CHECKPOINT_VERSION:

@@ -11,7 +11,7 @@ import io
 import logging
 import math
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 from wanderland_nav.atomic import atomic_write_text
 
@@ -25,6 +25,10 @@ class Logger(Protocol):
     def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
         """A TensorDict `[B, T]` of transitions (positions, actions, images...) for loggers that can
         show trajectories; scalar-only loggers ignore it."""
+
+    def truncate(self, keep: Callable[[int, str], bool]) -> int:
+        """A resumed run: drop every scalar logged earlier for which `keep(step, key)` is False (what was
+        logged after the checkpoint it resumes from, and is logged again); -> how many were dropped."""
 
     def close(self) -> None: ...
 
@@ -59,6 +63,15 @@ class ConsoleCSVLogger:
             log.info("step %d | %s", step, " ".join(f"{k}={v:.4g}" for k, v in sorted(clean.items())))
         if self._calls % self.flush_every == 0:
             self.flush()
+
+    def truncate(self, keep: Callable[[int, str], bool]) -> int:
+        kept = [r for r in self.rows if keep(r[0], r[1])]
+        dropped, self.rows = len(self.rows) - len(kept), kept
+        if dropped:
+            log.info("%s: %d rows logged after the checkpoint dropped (the resumed run logs them again)",
+                     self.path, dropped)
+        self.flush()
+        return dropped
 
     def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
         return None

@@ -50,6 +50,31 @@ class Recipe:
     sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
 
 
+def eval_prefix(row: str) -> str:
+    """`eval/<row>`: each evaluation's scalars carry the row they belong to ("untrained" and "BC" are both
+    taken at step 0); non-alphanumerics become `_` ("BC+RL sampled" -> `eval/BC_RL_sampled`)."""
+    return "eval/" + "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in row)
+
+
+def logged_before(state: dict | None, results: dict) -> Callable[[int, str], bool]:
+    """Which scalars an earlier run logged that the resumed run keeps (`Logger.truncate`): evaluations whose
+    result is stored, BC's when BC is done, PPO's (every other key, at PPO frames) up to the checkpoint's
+    frame. The rest is redone, so it would otherwise appear twice (one step, two values)."""
+    done_evals = {eval_prefix(row) for row in results}
+    bc_done = bool(state) and state.get("phase") in ("bc_done", "ppo", "ppo_done")
+    frames = int((state or {}).get("counters", {}).get("ppo_frames", 0)) if state and state.get("phase") in (
+        "ppo", "ppo_done") else 0
+
+    def keep(step: int, key: str) -> bool:
+        if key.startswith("eval/"):
+            return "/".join(key.split("/")[:2]) in done_evals
+        if key.startswith("bc/"):
+            return bc_done
+        return 0 < step <= frames
+
+    return keep
+
+
 def _load_results(path: Path, state, identity_hash: str) -> dict:
     if state is None or not path.is_file():
         return {}
@@ -74,6 +99,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     results_path = r.run_dir / "results.json"
     results = _load_results(results_path, state, r.identity["hash"])
     phase = state.get("phase") if state else None
+    r.logger.truncate(logged_before(state, results))
     save_kw = dict(config={**r.config, "identity": r.identity})
     times: dict[str, float] = {}
 
@@ -89,11 +115,12 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         t = time.perf_counter()
         with _timed(times, f"eval {name}"):
             res = r.evaluate(name, r.policy, r.eval_env, step, deterministic=deterministic)
+        o = res.summary["overall"]
+        # logged before the result is stored: a kill in between redoes the evaluation and drops this row
+        r.logger.log_scalars({f"{eval_prefix(name)}/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)
         results[name] = {"summary": res.summary, "records": res.records, "seconds": time.perf_counter() - t,
                          "identity": r.identity["hash"], "frames": step}
         atomic_write_json(results_path, results)
-        o = res.summary["overall"]
-        r.logger.log_scalars({f"eval/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)
         log.info("eval %s: NE %.2f SR %.3f SPL %.3f IR %.3f (%d episodes, %.1fs)", name, o["NE"], o["SR"], o["SPL"],
                  o["IR"], o["episodes"], time.perf_counter() - t)
 

@@ -152,10 +152,12 @@ def splat_from_scans(scans: list[np.ndarray], world_from_sensor: np.ndarray, min
 
 
 def read_scans(root: Path) -> list[np.ndarray]:
-    """The KITTI `.bin` scans in `root/lidar` in name order ([N_i, 4]); refuses other files and bad records."""
+    """The KITTI `.bin` scans in `root/lidar` in the loader's order ([N_i, 4], the order of `poses.txt`);
+    refuses other files and bad records."""
+    from wanderland_nav.scene.loader import visible_files
     from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_kitti_bin
 
-    files = sorted(p for p in (Path(root) / "lidar").glob("*") if p.is_file() and p.suffix.lower() != ".txt")
+    files = [p for p in visible_files(Path(root) / "lidar") if p.suffix.lower() != ".txt"]
     if not files or any(p.suffix.lower() != ".bin" for p in files):
         raise WanderlandInputError(f"{Path(root) / 'lidar'}: a LiDAR splat is built from KITTI .bin scans "
                                    f"(x y z intensity); found {[p.name for p in files] or 'none'}")

@@ -18,12 +18,14 @@ file and the field: a scene that half-loads gives wrong collision meshes and wro
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
 import numpy as np
 
 from wanderland_nav.geometry import parse_up_axis, validate_rigid
 from wanderland_nav.scene import colmap as C
+from wanderland_nav.scene.products import products_dir
 from wanderland_nav.scene.types import Camera, Scene, SceneFormatError
 from wanderland_nav.scene.pointcloud import (LIDAR_SUFFIXES, PointCloudFormatError, read_ply_points,
                                              read_points_any)
@@ -59,9 +61,13 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
     else:
         points, colors, lidar_poses, lidar_filter = _load_v2_points(root, meta)
 
-    def opt(name: str) -> Path | None:
-        p = root / name
-        return p if p.is_file() else None
+    products = products_dir(root)  # before any computation: a read-only scene's files go to a cache folder
+
+    def opt(name: str) -> Path | None:  # a generated file: where this run writes it first, then beside the scene
+        for d in ([products] if products is not None else []) + [root]:
+            if (d / name).is_file():
+                return d / name
+        return None
 
     return Scene(
         name=(meta.name if meta and meta.name else root.name), root=root, version=version, up_axis=up,
@@ -71,7 +77,7 @@ def load_scene(path, up_axis: str | None = None) -> Scene:
         environment=meta.environment if meta else None, indoor_regions=meta.indoor_regions if meta else [],
         up_axis_source=source, mesh_path=opt("scene.ply") if version == "v2" else None,
         meta={**(meta.raw if meta else {}), **({"lidar_filter": lidar_filter} if lidar_filter else {})},
-        lidar_poses=lidar_poses,
+        lidar_poses=lidar_poses, products_root=products,
     )
 
 
@@ -88,11 +94,23 @@ def _sparse_dir(root: Path) -> Path | None:
     return None
 
 
+def _name_key(p: Path) -> list:
+    """Natural order: digit runs compare as numbers, so `2.bin` precedes `10.bin` (KITTI-style numbering
+    without zero padding; text order would give scan 10 the pose of scan 2)."""
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", p.name) if t]
+
+
+def visible_files(folder: Path) -> list[Path]:
+    """The files in `folder` in natural name order, without hidden ones (`.DS_Store`, macOS AppleDouble `._x.bin`
+    copies, which carry a scan's suffix but hold resource forks); none when `folder` is not a folder."""
+    if not folder.is_dir():
+        return []
+    return sorted((p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")), key=_name_key)
+
+
 def _lidar_files(root: Path) -> list[Path]:
-    """Point-cloud files in `lidar/` (sorted by name: the order `lidar/poses.txt` lines follow)."""
-    ldir = root / "lidar"
-    return sorted(p for p in ldir.iterdir() if p.is_file() and p.suffix.lower() in LIDAR_SUFFIXES) \
-        if ldir.is_dir() else []
+    """Point-cloud files in `lidar/` in natural name order: the order `lidar/poses.txt` lines follow."""
+    return [p for p in visible_files(root / "lidar") if p.suffix.lower() in LIDAR_SUFFIXES]
 
 
 SCENE_LAYOUTS = ("a scene folder holds sparse/0 (COLMAP) or raw_pcd.ply (v1), or scene.ply or point clouds "
@@ -382,9 +400,16 @@ def _load_v1_points(root: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
 
 
-def _read_kitti_poses(path: Path, n: int) -> np.ndarray:
+#: default limit (m) between consecutive `lidar/poses.txt` poses: scans are registered by their overlap, and a
+#: vehicle LiDAR sees ~100 m (Velodyne HDL-64: 120 m), so consecutive scans further apart share nothing; a
+#: translation in millimetres puts a scan kilometres away. `scene_meta.json` `lidar_max_pose_jump` overrides it
+MAX_POSE_JUMP = 100.0
+
+
+def _read_kitti_poses(path: Path, files: list[Path], max_jump: float) -> np.ndarray:
     """KITTI poses file: one row-major 3x4 world_from_lidar per line (`#` comments and blank lines
-    skipped) -> `[n,4,4]`. Errors quote the file's 1-based line number."""
+    skipped) -> `[n,4,4]`, one per scan in `files` (exactly). Errors quote the file's 1-based line number."""
+    n = len(files)
     rows, lines = [], []
     for ln, text in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
         t = text.split("#", 1)[0].split()
@@ -398,15 +423,24 @@ def _read_kitti_poses(path: Path, n: int) -> np.ndarray:
             raise SceneFormatError(f"{path}:{ln}: a pose line needs 12 numbers (row-major 3x4), got {len(vals)}")
         rows.append(vals)
         lines.append(ln)
-    if len(rows) < n:
-        raise SceneFormatError(f"{path}: {len(rows)} poses for {n} lidar frames (one line per frame, in name order)")
+    if len(rows) != n:  # one scan more or fewer shifts every later pose onto the wrong scan
+        raise SceneFormatError(f"{path}: {len(rows)} poses for {n} lidar scans ({files[0].name} .. {files[-1].name}); "
+                               "poses.txt needs exactly one line per scan, in the scans' name order")
     T = np.tile(np.eye(4), (n, 1, 1))
-    T[:, :3, :] = np.asarray(rows[:n]).reshape(n, 3, 4)
+    T[:, :3, :] = np.asarray(rows).reshape(n, 3, 4)
     for i in range(n):  # tens of frames: per-pose checks so the message names the line
         try:
             validate_rigid(T[i], what=f"{path}:{lines[i]}: pose")
         except ValueError as e:
             raise SceneFormatError(str(e).replace(" at index [0]", "")) from None
+    jumps = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)  # [n-1] metres between consecutive scans
+    if n > 1 and jumps.max() > max_jump:
+        i = int(jumps.argmax())
+        raise SceneFormatError(
+            f"{path}:{lines[i + 1]}: pose of {files[i + 1].name} is {jumps[i]:.1f} m from the previous one "
+            f"(line {lines[i]}, {files[i].name}); consecutive scans further apart than {max_jump:g} m cannot "
+            "overlap (a translation in millimetres, or a missing scan?). If the capture really jumps, set "
+            "\"lidar_max_pose_jump\": <metres> in scene_meta.json")
     return T
 
 
@@ -416,7 +450,11 @@ def _scan_poses(root: Path, files: list[Path], meta) -> np.ndarray | None:
     an error unless `scene_meta.json` says `"lidar_registered": true`: stacking unmoved scans is wrong."""
     ldir = root / "lidar"
     if (ldir / "poses.txt").is_file():
-        return _read_kitti_poses(ldir / "poses.txt", len(files))
+        jump = meta.raw.get("lidar_max_pose_jump", MAX_POSE_JUMP) if meta else MAX_POSE_JUMP
+        if not np.isfinite(jump) or jump <= 0:
+            raise SceneFormatError(f"{meta.path}: field 'lidar_max_pose_jump' must be a number > 0 (metres), "
+                                   f"got {jump!r}")
+        return _read_kitti_poses(ldir / "poses.txt", files, float(jump))
     registered = bool(meta.raw.get("lidar_registered", False)) if meta else False
     if len(files) > 1 and not registered:
         raise SceneFormatError(
@@ -469,6 +507,8 @@ def _load_v2_points(root: Path, meta) -> tuple[np.ndarray, np.ndarray, np.ndarra
             if len(pc) == 0:
                 raise SceneFormatError(f"{f}: empty scan (0 points)")
             _check_finite(f, pc.xyz)
+            if not pc.xyz.any():  # a zero-filled file (a failed copy, a placeholder) reads as points at the sensor
+                raise SceneFormatError(f"{f}: all {len(pc)} points are (0, 0, 0): a zero-filled scan, not a capture")
             xyz, rgb = pc.xyz, pc.rgb
             if min_range > 0:  # sensor frame: returns from the capture platform itself
                 far = np.linalg.norm(xyz[:, :2], axis=1) >= min_range

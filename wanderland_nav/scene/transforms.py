@@ -192,9 +192,55 @@ class SceneMeta:
     raw: dict
 
 
+#: every top-level `scene_meta.json` key -> (JSON types it may have, what it is). A key not here is refused with
+#: the nearest known one: a misspelt `lidar_registerd` would otherwise be ignored and the scene load as if unset
+META_SCHEMA: dict[str, tuple[tuple[type, ...], str]] = {
+    "version": ((str,), "'v1' or 'v2' (default: from the files present)"),
+    "name": ((str,), "the scene's name (default: the folder name)"),
+    "up_axis": ((str,), "the scene frame's up axis, e.g. '+z' or '-y'"),
+    "environment": ((str,), "one of " + ", ".join(ENVIRONMENTS)),
+    "indoor_regions": ((list,), "nav-frame polygons [{polygon_xy, z_min, z_max}]"),
+    "lidar_registered": ((bool,), "true: the lidar/ files are already in one world frame (no poses.txt)"),
+    "lidar_min_range": ((int, float), "metres; returns closer to the sensor are the capture platform"),
+    "lidar_max_pose_jump": ((int, float), "metres; consecutive lidar/poses.txt poses further apart are refused"),
+    "lidar_splat": ((dict,), "written by the LiDAR splat builder"),
+    "generator": ((dict,), "written by the demo scene generator"),
+    "degradation": ((dict,), "written by the degraded-scene builder"),
+    "notes": ((str, list, dict), "free-form, never read"),
+}
+_REGION_KEYS = ("polygon_xy", "z_min", "z_max", "name")
+
+
+def _unknown_keys(path: Path, obj: dict, known, where: str) -> None:
+    import difflib
+
+    for key in obj:
+        if key not in known:
+            near = difflib.get_close_matches(str(key), list(known), n=1, cutoff=0.6)
+            hint = f"did you mean '{near[0]}'? " if near else ""
+            raise SceneFormatError(f"{path}: {where}unknown field '{key}' ({hint}known: {', '.join(known)}; "
+                                   "free-form text goes under 'notes')")
+
+
+def _typed(path: Path, obj: dict) -> None:
+    for key, (types, what) in META_SCHEMA.items():
+        v = obj.get(key)
+        # bool is an int in Python: a number field must refuse true/false, a flag must refuse "false"
+        if v is not None and (not isinstance(v, types) or (isinstance(v, bool) and bool not in types)):
+            raise SceneFormatError(f"{path}: field '{key}' must be {' or '.join(dict.fromkeys(_JSON_NAMES[t] for t in types))} "
+                                   f"({what}), got {json.dumps(v)}")
+
+
+_JSON_NAMES = {str: "a string", bool: "true or false", int: "a number", float: "a number", list: "a list",
+               dict: "an object"}
+
+
 def read_scene_meta(path) -> SceneMeta:
+    """`scene_meta.json` -> SceneMeta; unknown keys (with the nearest known one) and wrong types are refused."""
     path = Path(path)
     obj = _load_json(path)
+    _unknown_keys(path, obj, META_SCHEMA, "")
+    _typed(path, obj)
     up = obj.get("up_axis")
     if up is not None:
         try:
@@ -205,13 +251,12 @@ def read_scene_meta(path) -> SceneMeta:
     if env is not None and env not in ENVIRONMENTS:
         raise SceneFormatError(f"{path}: field environment must be one of {ENVIRONMENTS}, got {env!r}")
     regions = obj.get("indoor_regions", [])
-    if not isinstance(regions, list):
-        raise SceneFormatError(f"{path}: field indoor_regions must be a list")
     clean = []
     for i, reg in enumerate(regions):
         where = f"{path}: indoor_regions[{i}]"
         if not isinstance(reg, dict) or "polygon_xy" not in reg:
             raise SceneFormatError(f"{where} needs field 'polygon_xy'")
+        _unknown_keys(path, reg, _REGION_KEYS, f"indoor_regions[{i}]: ")
         try:
             poly = np.asarray(reg["polygon_xy"], dtype=np.float64)
         except (TypeError, ValueError):
@@ -223,5 +268,4 @@ def read_scene_meta(path) -> SceneMeta:
         if zmin >= zmax:
             raise SceneFormatError(f"{where}: z_min ({zmin}) must be below z_max ({zmax})")
         clean.append({**reg, "polygon_xy": poly.tolist(), "z_min": zmin, "z_max": zmax})
-    name = obj.get("name")
-    return SceneMeta(path, name if isinstance(name, str) else None, up, env, clean, obj)
+    return SceneMeta(path, obj.get("name"), up, env, clean, obj)

@@ -81,6 +81,9 @@ class Scene:
     # (one registered cloud such as `colorized.las`, or scans declared registered without poses)
     lidar_poses: np.ndarray | None = None
     meta: dict = field(default_factory=dict)  # scene_meta.json content (generator info etc.)
+    # where generated files (collision mesh, navmesh, episodes, goal views) go: the scene folder, or, when
+    # that is read-only, a cache folder (`scene.products.products_dir`); None: the scene folder
+    products_root: Path | None = None
 
     def __post_init__(self) -> None:
         self.up_axis = parse_up_axis(self.up_axis, source=f"scene {self.name!r} up_axis")
@@ -89,6 +92,11 @@ class Scene:
         if self.colors.shape[0] != self.points.shape[0]:
             raise SceneFormatError(f"scene {self.name!r}: {self.points.shape[0]} points but "
                                    f"{self.colors.shape[0]} colours")
+
+    @property
+    def products(self) -> Path:
+        """The folder generated files are written to (and looked up in first)."""
+        return Path(self.products_root) if self.products_root is not None else Path(self.root)
 
     @property
     def nav_from_scene(self) -> np.ndarray:

@@ -4,7 +4,9 @@ recording: scalar curves (losses, train stats, eval NE/SR/SPL/IR) and, every `ro
 
 Selected with `logger=rerun` (`conf/logger/rerun.yaml`); training defaults to the console logger.
 One recording per run: `<run_dir>/rerun.rrd` (application id `wanderland_nav`, recording id = the
-run folder name, so a resumed run writes a new file with the same id, which the viewer merges).
+run folder name). A resumed run rewrites the file: the earlier run's scalars are read back first and
+logged again up to the checkpoint it resumes from (`truncate`), so each step holds one value; the
+earlier run's rollouts are not carried over.
 
 Cost (why the defaults): scalars are a few microseconds each; a rollout costs one batched call per
 entity and its frames' bytes, so it is throttled by `rollout_every` and `max_agents`. The file is
@@ -15,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import rerun as rr
@@ -43,6 +45,8 @@ class RerunLogger:
                  file_name: str = "rerun.rrd", scene=None):
         self.path = Path(out_dir) / file_name if out_dir is not None else None
         rid = recording_id or (Path(out_dir).resolve().name if out_dir is not None else "run")
+        # an earlier run's scalars, read before save() overwrites the file; logged again by truncate()
+        self._earlier = scalar_rows(self.path) if self.path is not None and self.path.is_file() else None
         self.rec = rr.RecordingStream(application_id, recording_id=rid)
         bp = default_blueprint(training=True, camera=False, plots=False)  # rollouts sit under world/rollouts/<tag>
         if self.path is not None:
@@ -68,10 +72,21 @@ class RerunLogger:
         """Each `group/name` scalar becomes the time series entity `group/name` on timeline `step`.
 
         NaN / inf are logged as they are (a diverged loss shows as a gap or a spike, never as silence)."""
+        if self._earlier is not None:  # resumed without truncate(): nothing is known to be redone
+            self.truncate(lambda step, key: True)
         self.rec.set_time("step", sequence=int(step))
         for k, v in scalars.items():
             if v is not None:
                 self.rec.log(k, rr.Scalars(float(v)))
+
+    def truncate(self, keep: Callable[[int, str], bool]) -> int:
+        """Log the earlier run's scalars again where `keep(step, key)`; -> how many were dropped."""
+        earlier, self._earlier = self._earlier or [], None
+        kept = [r for r in earlier if keep(r[0], r[1])]
+        for step, key, value in kept:
+            self.rec.set_time("step", sequence=step)
+            self.rec.log(key, rr.Scalars(value))
+        return len(earlier) - len(kept)
 
     def log_rollout(self, rollout: Any, step: int, tag: str = "eval") -> None:
         """A `Rollout` or a TorchRL TensorDict `[B, T]` (a collector batch), when its turn comes (`rollout_every`).
@@ -106,6 +121,18 @@ class RerunLogger:
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()  # writes the footer: the file is complete
+
+
+def scalar_rows(path: str | Path) -> list[tuple[int, str, float]]:
+    """Every `Scalars` value of a recording as `(step, entity, value)`, in step order."""
+    rows = []
+    for c in rr.chunk.RrdReader(str(path)).stream():
+        rb = c.to_record_batch()
+        if "Scalars:scalars" in rb.schema.names and "step" in rb.schema.names:
+            key = c.entity_path.lstrip("/")
+            rows += [(int(s), key, float(v[0])) for s, v in zip(rb.column("step").to_pylist(),
+                                                                rb.column("Scalars:scalars").to_pylist()) if v]
+    return sorted(rows, key=lambda r: r[0])
 
 
 def scalar_entities(path: str | Path) -> dict[str, np.ndarray]:
