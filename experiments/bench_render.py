@@ -135,10 +135,10 @@ def _child(cfg: dict) -> dict:
     dev = cfg["device"]
     g, V, K = _scene(cfg["n"], cfg["C"], cfg["size"], dev)
     evals = [0]
-    if hasattr(R, "forward_chunk"):  # a83eb0b on: the forward's chunk kernel (pixels x entries evaluated)
+    if hasattr(R, "forward_chunk"):  # the forward's chunk kernel (pixels x entries evaluated)
         orig = R.forward_chunk
 
-        def counting(*args):  # (q [6, Ta, L], cols, T_in, coords, ...); before 2026-11-24 22:45 (rows [Ta, L, K], ...)
+        def counting(*args):  # (q [6, Ta, L], cols, T_in, coords, ...); an older layout: (rows [Ta, L, K], ...)
             q, coords = args[0], args[3] if args[0].dim() == 3 and args[0].shape[0] == 6 else args[4]
             evals[0] += coords.numel() ** 2 * q.shape[-2] * q.shape[-1] if q.shape[0] == 6 else \
                 coords.numel() ** 2 * q.shape[0] * q.shape[1]

@@ -1,4 +1,4 @@
-"""One seed table from rows taken out of several runs' `results.json` (issue 16: generalisation rows).
+"""One seed table from rows taken out of several runs' `results.json` (generalisation rows).
 
     PYTHONPATH=$PWD python experiments/train/rows_table.py \\
         --row BC '/tmp/learning/s7gen/layout1/bc_s*/results.json:init' \\

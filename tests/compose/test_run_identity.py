@@ -1,4 +1,4 @@
-"""Run identity (issue 15, item 2): every checkpoint and result row knows the config and scene it came from,
+"""Run identity: every checkpoint and result row knows the config and scene it came from,
 the default run folder carries it, and a run folder of another identity is refused with what differs."""
 
 from __future__ import annotations
