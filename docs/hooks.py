@@ -4,6 +4,7 @@ relative links work unchanged on the site and on the repository's file view. One
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from mkdocs.structure.files import File
@@ -20,3 +21,12 @@ def on_files(files, config):
             uri = f"results/{study.name}/" + ("index.md" if rel == "README.md" else rel)
             files.append(File.generated(config, uri, abs_src_path=str(f)))
     return files
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Links written for the repository's file view, made right for the site: a study's `README.md` is its
+    `index.md` here, and `docs/` is the site's root two levels up."""
+    if not page.file.src_uri.startswith("results/"):
+        return markdown
+    markdown = re.sub(r"\]\(((?:\.\./)+)docs/", r"](\1", markdown)
+    return re.sub(r"\]\(((?:\.\./)*[\w./-]*?)README\.md(#[^)]*)?\)", r"](\1index.md\2)", markdown)
