@@ -6,8 +6,8 @@ by 1% of the object extent; C cameras orbit it at 1.3x its extent, looking at it
 
 Each configuration runs in a fresh subprocess so `ru_maxrss` gives its own peak; we report the peak
 resident memory *added* by rendering (above the loaded scene + interpreter) and the total.
-Timings: best of `--repeat` runs, both wall clock and process CPU time. The machine is shared with
-other engineers, so wall times are noisy; CPU time of a 1-thread run is the most stable figure.
+Timings: best of `--repeat` runs, both wall clock and process CPU time. On a shared machine
+wall times are noisy; CPU time of a 1-thread run is the most stable figure.
 
 A "straightforward" baseline (per-tile Python loop, dense autograd over each tile's whole sorted list,
 no chunking, no early termination, no custom backward) is included for comparison on the same
