@@ -1,7 +1,7 @@
 """Benchmark NavEnv: environment frames per second and where a step's time goes.
 
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
-                                    [--device cpu|cuda] [--threads 2] [--max-gaussians 10000] [--no-off]
+                                    [--device cpu|cuda] [--threads 2] [--lod-px 1] [--no-off]
                                     [--compete 0] [--repeats 1] [--render-threads N] [--policy citywalker]
 
 `--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
@@ -32,12 +32,13 @@ from pathlib import Path
 
 import torch
 
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
-def prepare(preset: str, root: Path, num_episodes: int, max_gaussians: int | None = None):
+
+def prepare(preset: str, root: Path, num_episodes: int, lod_px: float | None = None):
     from planners import NavMesh
     from wanderland_nav.episodes.generate import write_scene_episodes
-    from wanderland_nav.render import Gaussians
-    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.render.lod import load_splat
     from wanderland_nav.scene_preparation import ensure_demo_scene
     from wanderland_nav.scene import load_scene
 
@@ -47,7 +48,7 @@ def prepare(preset: str, root: Path, num_episodes: int, max_gaussians: int | Non
     if not episodes.is_file():
         write_scene_episodes(scene, navmesh, episodes, num_episodes=num_episodes, seed=0)
         scene = load_scene(scene.root)
-    return scene, navmesh, lod_subset(Gaussians.load(scene.gaussians_path), max_gaussians)  # training's LOD subset
+    return scene, navmesh, load_splat(scene.gaussians_path, lod_px)  # the camera's level of detail
 
 
 def load_policy(name: str):
@@ -135,7 +136,8 @@ def main():
     ap.add_argument("--episodes", type=int, default=60)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--max-gaussians", type=int, default=None, help="render.max_gaussians LOD (default: all)")
+    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=DEFAULT_LOD_PX,
+                    help="render.lod_px level of detail (none: all Gaussians)")
     ap.add_argument("--no-off", action="store_true", help="skip the camera-off row")
     ap.add_argument("--compete", type=int, default=0, help="CPU-bound busy-loop processes running alongside")
     ap.add_argument("--repeats", type=int, default=1)
@@ -144,7 +146,7 @@ def main():
     ap.add_argument("--minibatch", type=int, default=200, help="rows of the policy's timed forward + backward")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.max_gaussians)
+    scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.lod_px)
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.compete)]
     try:
         from wanderland_nav.envs.camera import available_cores

@@ -13,7 +13,7 @@ A "straightforward" baseline (per-tile Python loop, dense autograd over each til
 no chunking, no early termination, no custom backward) is included for comparison on the same
 scene and machine state (`--baseline`).
 
-Env operating points (`--env`): the Gaussians (all, or training's `--max-gaussians` LOD) and the B
+Env operating points (`--env`): the Gaussians (all, or training's `--lod-px` LOD) and the B
 agent cameras of a `NavEnv` reset on the tiny demo scene; prints a per-stage CPU-time profile of
 the dense reference (projection, colours, binning, composite) and of the packed fast path, then
 renders/s of `render()` (eager) and of the compiled path, and the PSNR between the two. The stage
@@ -23,8 +23,8 @@ groups on threads, `render/shards.py`): total CPU, per-group cost and the 2-thre
 
 Usage:
   python experiments/bench_render.py                     # quick table (CPU, 2 threads)
-  python experiments/bench_render.py --env --batch 64 --res 32 --max-gaussians 10000 [--compiled]
-  python experiments/bench_render.py --env --groups --batch 64 --res 32 --max-gaussians 10000 --repeat 2
+  python experiments/bench_render.py --env --batch 64 --res 32 --lod-px 1 [--compiled]
+  python experiments/bench_render.py --env --groups --batch 64 --res 32 --lod-px 1 --repeat 2
   python experiments/bench_render.py --only 50000,64,1,fwd --compiled   # compiled vs eager rows
   python experiments/bench_render.py --psnr 64           # compiled vs eager PSNR on guitar.ply, playbot.ply
   python experiments/bench_render.py --threads 1 --baseline
@@ -44,6 +44,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 REPO = Path(__file__).resolve().parents[1]
 SPLAT = REPO.parent / "shared" / "data" / "splats" / "guitar.ply"
@@ -201,7 +203,7 @@ def main() -> None:
     ap.add_argument("--env", action="store_true", help="profile the env's operating point (see above)")
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--res", type=int, default=32)
-    ap.add_argument("--max-gaussians", type=int, default=None)
+    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=DEFAULT_LOD_PX)
     ap.add_argument("--psnr", type=int, default=None, help="compiled vs eager PSNR at this size on the real splats")
     ap.add_argument("--groups", action="store_true", help="with --env: cost of rendering the cameras in groups")
     ap.add_argument("--dump-views", default=None, help="with --env: save the env cameras + Gaussians to this .pt")
@@ -222,11 +224,11 @@ def main() -> None:
         if a.views:
             views_costs(a.views, [int(x) for x in a.sizes.split(",")], a.repeat)
         elif a.env and a.dump_views:
-            dump_views(a.batch, a.res, a.max_gaussians, a.dump_views)
+            dump_views(a.batch, a.res, a.lod_px, a.dump_views)
         elif a.env and a.groups:
-            group_costs(a.batch, a.res, a.max_gaussians, a.repeat)
+            group_costs(a.batch, a.res, a.lod_px, a.repeat)
         elif a.env:
-            env_profile(a.batch, a.res, a.max_gaussians, a.repeat, a.compiled)
+            env_profile(a.batch, a.res, a.lod_px, a.repeat, a.compiled)
         else:
             splat_psnr(a.psnr, a.threads)
         return

@@ -18,15 +18,17 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 
 
-def env_views(B: int, res: int, max_gaussians: int | None):
-    """(Gaussians, viewmats [B,4,4], Ks [B,3,3]) of the B agents right after a seeded env reset."""
+def env_views(B: int, res: int, lod_px: float | None):
+    """(Gaussians, viewmats [B,4,4], Ks [B,3,3]) of the B agents right after a seeded env reset.
+
+    The stage profiles take raw Gaussians: with `lod_px` set, those of the union of the B cameras' cuts."""
     from bench_env import prepare
 
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.camera import AgentCamera, camera_intrinsics
     from wanderland_nav.envs.factory import make_nav_env
 
-    scene, navmesh, g = prepare("tiny", REPO / "data/scenes/bench", 60, max_gaussians)
+    scene, navmesh, g = prepare("tiny", REPO / "data/scenes/bench", 60, lod_px)
     cfg = NavEnvConfig()
     cfg.camera.width = cfg.camera.height = res
     cfg.camera.enabled = False  # poses only; the renderer is what we time
@@ -40,7 +42,10 @@ def env_views(B: int, res: int, max_gaussians: int | None):
         env = make_nav_env(scene, config=cfg, batch_size=B, device="cpu", navmesh=navmesh, gaussians=None, seed=0)
     env.reset()
     viewmats = AgentCamera(cfg.camera, scene.nav_from_scene, None, None, "cpu").cam_from_world(env._pos, env._yaw)
-    return g, viewmats, camera_intrinsics(cfg.camera).expand(B, 3, 3).contiguous()
+    Ks = camera_intrinsics(cfg.camera).expand(B, 3, 3).contiguous()
+    if lod_px is not None:  # the nodes any of the B cameras renders, as one set of Gaussians
+        g = g.as_gaussians(g.cut(viewmats, Ks, res, res, g.target_px)[1].unique())
+    return g, viewmats, Ks
 
 
 def _best(fn, repeat: int):
@@ -98,10 +103,10 @@ def _stage_rows(g, V, K, res, repeat):
     return rows, stats
 
 
-def env_profile(B: int, res: int, max_gaussians: int | None, repeat: int, compiled: bool) -> None:
+def env_profile(B: int, res: int, lod_px: float | None, repeat: int, compiled: bool) -> None:
     from wanderland_nav.render import rasterization
 
-    g, V, K = env_views(B, res, max_gaussians)
+    g, V, K = env_views(B, res, lod_px)
     print(f"{len(g)} Gaussians, B={B} cameras, {res}x{res}, env reset poses (tiny demo, seed 0)")
     with torch.no_grad():
         rows, stats = _stage_rows(g, V, K, res, repeat)
@@ -153,13 +158,13 @@ def _scene_all(bench_render, C: int, size: int):
     return bench_render._scene(n, C, size, "cpu")
 
 
-def group_costs(B: int, res: int, max_gaussians: int | None, repeat: int) -> None:
+def group_costs(B: int, res: int, lod_px: float | None, repeat: int) -> None:
     """CPU ms of rendering the B env cameras as groups of g cameras (one renderer call each, 1 thread),
     each group's own cost, and the 2-thread makespan when two threads pull groups in order (what
     `render.shards` does): the price of smaller calls against the balance they give."""
     from wanderland_nav.render import render
 
-    g, V, K = env_views(B, res, max_gaussians)
+    g, V, K = env_views(B, res, lod_px)
     torch.set_num_threads(1)
     print(f"B={B}, {res}x{res}, {len(g)} Gaussians, 1 thread, best CPU ms of {repeat}")
     for size in (1, 2, 4, 8, 16, 32, 64):
@@ -177,10 +182,10 @@ def group_costs(B: int, res: int, max_gaussians: int | None, repeat: int) -> Non
               f"(ideal {sum(costs) / 2:7.1f})  groups: {shown}")
 
 
-def dump_views(B: int, res: int, max_gaussians: int | None, path: str) -> None:
+def dump_views(B: int, res: int, lod_px: float | None, path: str) -> None:
     """Save the B env-reset cameras and the LOD Gaussians (raw fields) to `path`, so that another code
     version's renderer can be timed on exactly these poses (`views_costs`)."""
-    g, V, K = env_views(B, res, max_gaussians)
+    g, V, K = env_views(B, res, lod_px)
     torch.save(dict(V=V, K=K, res=res, gaussians={f: getattr(g, f) for f in g.__dataclass_fields__}), path)
     print(f"saved {B} cameras ({res}x{res}) and {len(g)} Gaussians to {path}")
 

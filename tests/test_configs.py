@@ -128,7 +128,7 @@ _SMOKE_RUNS: dict[str, Path] = {}   # exp -> run_dir, so later tests reuse a run
 def smoke_cfg(exp: str, scene: Path, run_dir: Path):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         return compose("train", overrides=[f"+exp={exp}", "debug=smoke", "scene=folder", f"scene.path={scene}",
-                                           f"run_dir={run_dir}", "render.max_gaussians=2000"])
+                                           f"run_dir={run_dir}", "render.lod_px=4"])
 
 
 @pytest.mark.parametrize("exp", EXPS)

@@ -3,14 +3,14 @@
     python experiments/real_streets/kitti_street.py --scene <dir>/kitti_street      # the scene folder, prepared
     python experiments/real_streets/kitti_splat_frames.py --scene <dir>/kitti_street [--build] \
         [--more <degraded scene> ...] [--png experiments/real_streets/kitti_splat_frames.png] [--size 128] \
-        [--max-gaussians 10000]
+        [--lod-px 1]
 
 `--build` first writes the street's splat (`write_lidar_splat`). Then,
 per scene (the street and each `--more` one, e.g. the study's degraded copies), one frame at every other sensor
 pose, with the agent's feet `SENSOR_HEIGHT` (times the scene's degradation scale) under the sensor looking along
 the trajectory, and the same poses looking 90 deg left: the default env camera (`conf/env`: pinhole, hfov 90,
-1.2 m above the feet, pitched 10 deg down) at `--size` pixels, from the `--max-gaussians` level of detail
-(`train`'s `render.max_gaussians`; the citywalker policy sees 32 x 32). False colour (grey = ground by LiDAR
+1.2 m above the feet, pitched 10 deg down) at `--size` pixels, from the `--lod-px` level of detail
+(`train`'s `render.lod_px`; the citywalker policy sees 32 x 32). False colour (grey = ground by LiDAR
 intensity, orange -> blue = height above the ground), NOT photographs.
 """
 
@@ -24,23 +24,25 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
+
 SENSOR_HEIGHT = 1.73  # metres from the KITTI Velodyne to the road (the dataset's sensor setup)
 
 
-def render_frames(root: Path, size: int, max_gaussians: int | None) -> tuple[np.ndarray, list[str]]:
+def render_frames(root: Path, size: int, lod_px: float | None) -> tuple[np.ndarray, list[str]]:
     """-> uint8 frames [F, size, size, 3] and their titles."""
     import json
 
     from wanderland_nav.envs.camera import AgentCamera
     from wanderland_nav.envs.config import CameraConfig
     from wanderland_nav.render import Gaussians, render
-    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.render.lod import load_splat
     from wanderland_nav.scene import load_scene
 
     scene = load_scene(root)
     scale = (json.loads((root / "scene_meta.json").read_text()).get("degradation") or {}).get("spec", {}).get("scale", 1)
     cfg = dataclasses.replace(CameraConfig(), width=size, height=size, render_threads=1)
-    g = lod_subset(Gaussians.load(scene.gaussians_path), max_gaussians)
+    g = load_splat(scene.gaussians_path, lod_px)
     cam = AgentCamera(cfg, scene.nav_from_scene, render, g, "cpu")
     path = scene.capture_positions() @ scene.nav_from_scene.T  # [K,3] sensor positions, nav frame
     step = np.gradient(path[:, :2], axis=0)
@@ -60,14 +62,14 @@ def main(argv=None) -> None:
     ap.add_argument("--build", action="store_true")
     ap.add_argument("--png", type=Path, default=Path(__file__).with_name("kitti_splat_frames.png"))
     ap.add_argument("--size", type=int, default=128)
-    ap.add_argument("--max-gaussians", type=int, default=10000)
+    ap.add_argument("--lod-px", type=lambda v: None if v == "none" else float(v), default=DEFAULT_LOD_PX)
     ap.add_argument("--more", type=Path, nargs="*", default=[])
     a = ap.parse_args(argv)
     if a.build:
         from wanderland_nav.scene.lidar_splat import write_lidar_splat
 
         print(write_lidar_splat(a.scene))
-    rows = [render_frames(root, a.size, a.max_gaussians) for root in [a.scene, *a.more]]
+    rows = [render_frames(root, a.size, a.lod_px) for root in [a.scene, *a.more]]
     import matplotlib
 
     matplotlib.use("Agg")
@@ -80,7 +82,7 @@ def main(argv=None) -> None:
             ax.imshow(f)
             ax.set_title(t, fontsize=7)
             ax.axis("off")
-    fig.suptitle(f"KITTI street, agent camera on the lidar_splat ({a.size} px, {a.max_gaussians} Gaussians): false "
+    fig.suptitle(f"KITTI street, agent camera on the lidar_splat ({a.size} px, level of detail {a.lod_px} px): false "
                  "colour from LiDAR, not photographic", fontsize=9)
     fig.tight_layout()
     fig.savefig(a.png, dpi=110)

@@ -43,14 +43,14 @@ def setup(scene_root: str):
 def memory_per_scene(paths, cfg) -> None:
     for sid in paths:
         t0 = time.perf_counter()
-        env = scene_env_fn(paths, cfg, split="train", max_gaussians=10000)(sid, 4, 0)
+        env = scene_env_fn(paths, cfg, split="train", lod_px=2.0)(sid, 4, 0)
         dt = time.perf_counter() - t0
         print(f"memory {sid}: {measure_bytes(env) / 2**20:.1f} MiB (NavEnv B=4, 10k LOD Gaussians), load {dt:.1f}s")
 
 
 def collect_fps(paths, policy, cfg, workers: int, iters: int, use_ray: bool) -> None:
     fpb = 4 * workers * 8  # 8 steps of 4 agents per worker per batch
-    env_fn = multi_scene_env_fn(list(paths), scene_env_fn(paths, cfg, split="train", max_gaussians=10000),
+    env_fn = multi_scene_env_fn(list(paths), scene_env_fn(paths, cfg, split="train", lod_px=2.0),
                                 batch_size=4, num_active=2, seed=0)
     t0 = time.perf_counter()
     c = make_collector(env_fn, make_actor(policy), frames_per_batch=fpb, total_frames=fpb * iters,

@@ -53,7 +53,7 @@ def test_train_refuses_a_run_folder_of_another_identity(demo_episodes, tmp_path)
 
     scene = demo_episodes.parent
     common = ["+exp=citywalker_rl", "debug=smoke", f"scene={scene}", f"run_dir={tmp_path / 'run'}",
-              "render.max_gaussians=500", "eval.episodes=1", "algo.bc.updates_per_round=1"]
+              "render.lod_px=4", "eval.episodes=1", "algo.bc.updates_per_round=1"]
     run(compose_config("train", common))
     ck = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
     rows = json.loads((tmp_path / "run" / "results.json").read_text())

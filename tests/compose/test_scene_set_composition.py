@@ -37,7 +37,7 @@ def test_train_recipe_over_a_set_steps_and_clones_every_scene(linked_set, tmp_pa
     from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 
     cfg = compose_config("train", ["+exp=citywalker_rl", "debug=smoke", "collector=ray", f"run_dir={tmp_path / 'run'}",
-                                   "render.max_gaussians=2000", *set_overrides(linked_set)])
+                                   "render.lod_px=4", *set_overrides(linked_set)])
     c = typed_config(cfg, TrainConfig)
     recipe, scene = training_recipe(c, {"seed": 0}, evaluate=None)
     assert isinstance(recipe.eval_env, SceneSetEvaluation) and recipe.eval_env.scene_ids == ["a", "b"]

@@ -11,7 +11,7 @@ def test_main_job_adds_sampled_rows_and_their_pairs(demo_episodes, tmp_path):
     from wanderland_nav.train import run
 
     run(compose_config("train", ["+exp=citywalker_rl", "debug=smoke", f"scene={demo_episodes.parent}",
-                                 f"run_dir={tmp_path / 'run'}", "render.max_gaussians=500", "eval.episodes=2",
+                                 f"run_dir={tmp_path / 'run'}", "render.lod_px=4", "eval.episodes=2",
                                  "algo.bc.updates_per_round=1", "eval.sampled_rows=true"]))
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert list(results) == ["untrained", "BC", "BC sampled", "BC+RL", "BC+RL sampled"]  # untrained: mean only

@@ -178,12 +178,12 @@ def test_replay_entry_point_rerenders_frames_and_expert_paths(recorded, demo, tm
     save_rollout(lean, short)
     conf = str(Path(replay.__file__).resolve().parents[1] / "conf")
     with initialize_config_dir(config_dir=conf, version_base="1.3"):
-        cfg = compose("replay", overrides=[f"rollout={lean}", f"out={tmp_path / 'a.rrd'}", "max_gaussians=1500",
+        cfg = compose("replay", overrides=[f"rollout={lean}", f"out={tmp_path / 'a.rrd'}", "lod_px=4",
                                            "agents=[0]", "max_points=500", "max_cameras=2",
                                            "frame_chunk=3"])
         replay.run(cfg)
         cfg2 = compose("replay", overrides=[f"episodes={env.scene.episodes_path}", f"out={tmp_path / 'b.rrd'}",
-                                            "max_gaussians=1500", "max_episodes=1", "camera.width=16", "path_stride=8",
+                                            "lod_px=4", "max_episodes=1", "camera.width=16", "path_stride=8",
                                             "camera.height=12", "max_points=500", "max_cameras=2"])
         replay.run(cfg2)
     a = _chunks(tmp_path / "a.rrd")

@@ -1,4 +1,4 @@
-"""Config parts -> objects: the env shaped to a policy, level-of-detail Gaussians, env factories,
+"""Config parts -> objects: the env shaped to a policy, the camera's level-of-detail splat, env factories,
 loggers and policies rebuilt from checkpoints. Only `compose` and the entry points call these."""
 
 from __future__ import annotations
@@ -26,8 +26,9 @@ def blind_env_config(env: NavEnvConfig) -> NavEnvConfig:
     return dataclasses.replace(env, camera=dataclasses.replace(env.camera, enabled=False, width=8, height=8))
 
 
-def scene_gaussians(scene, max_gaussians: int | None, *, needed: bool = True):
-    """The scene's Gaussians at `max_gaussians` level of detail; None when the camera is off.
+def scene_gaussians(scene, lod_px: float | None, *, needed: bool = True):
+    """The scene's splat as the camera renders it: its Gaussian hierarchy cut per view at `lod_px` pixels
+    (`render/lod.py`), or all Gaussians when `lod_px` is None; None when the camera is off.
     A camera without `3dgs.ply` raises naming the scene and the file."""
     if not needed:
         return None
@@ -36,10 +37,9 @@ def scene_gaussians(scene, max_gaussians: int | None, *, needed: bool = True):
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
                                 "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
                                 "turn the camera off (env.camera.enabled=false)")
-    from wanderland_nav.render import Gaussians
-    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.render.lod import load_splat
 
-    return lod_subset(Gaussians.load(path), max_gaussians)
+    return load_splat(path, lod_px)
 
 
 def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_size: int, seed: int, device: str,

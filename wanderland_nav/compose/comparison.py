@@ -57,11 +57,11 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         if label in rows:
             label = str(path)
         if scene_set is not None:
-            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, max_gaussians=render.get("max_gaussians"))
+            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, lod_px=render.get("lod_px"))
             res = SceneSetEvaluation(list(scene_set), envs, batch_size).run(PolicyActor(policy), num_episodes,
                                                                             seed=seed, name=label, progress=progress)
         else:
-            g = scene_gaussians(scene, render.get("max_gaussians"), needed=env_cfg.camera.enabled)
+            g = scene_gaussians(scene, render.get("lod_px"), needed=env_cfg.camera.enabled)
             env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
                                              seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
             res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)

@@ -63,8 +63,7 @@ def replay_frames(c: ReplayConfig, rollout, scene):
         print("replay: no 3dgs.ply for this scene; logging camera frustums without images")
         return None
     from wanderland_nav.envs.recording import render_rollout_frames
-    from wanderland_nav.render import Gaussians
-    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.render.lod import load_splat
 
-    gaussians = lod_subset(Gaussians.load(scene.gaussians_path), c.max_gaussians)
+    gaussians = load_splat(scene.gaussians_path, c.lod_px)
     return render_rollout_frames(rollout.meta, gaussians, device=c.device)

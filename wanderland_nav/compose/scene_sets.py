@@ -16,6 +16,7 @@ from functools import partial
 from pathlib import Path
 
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
 from wanderland_nav.envs.config import NavEnvConfig
@@ -72,16 +73,16 @@ def scene_set_identity(paths: dict[str, str]) -> dict:
     return {"scenes": {sid: scene_identity(p, Path(p) / "episodes.json") for sid, p in paths.items()}}
 
 
-def _scene_env(paths: dict[str, str], env_cfg: NavEnvConfig, split, device: str, max_gaussians, scene_id: str,
+def _scene_env(paths: dict[str, str], env_cfg: NavEnvConfig, split, device: str, lod_px, scene_id: str,
                sub_batch: int, seed: int):
     """One scene's `NavEnv` over its own navmesh, level-of-detail Gaussians and `episodes.json`."""
     scene = load_scene(paths[scene_id])
     return env_factory(scene, Path(scene.root) / "episodes.json", env_cfg, split=split, batch_size=sub_batch, seed=seed,
                        device=device, navmesh=load_navmesh(scene),
-                       gaussians=scene_gaussians(scene, max_gaussians, needed=env_cfg.camera.enabled))()
+                       gaussians=scene_gaussians(scene, lod_px, needed=env_cfg.camera.enabled))()
 
 
 def scene_env_fn(paths: dict[str, str], env_cfg: NavEnvConfig, *, split, device: str = "cpu",
-                 max_gaussians: int | None = None):
+                 lod_px: float | None = DEFAULT_LOD_PX):
     """A picklable `(scene_id, sub_batch, seed) -> NavEnv` over the prepared `paths`."""
-    return partial(_scene_env, dict(paths), env_cfg, split, device, max_gaussians)
+    return partial(_scene_env, dict(paths), env_cfg, split, device, lod_px)

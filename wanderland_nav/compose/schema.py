@@ -24,6 +24,7 @@ from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.gsfit.trainer import FitConfig
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.ppo import PPOConfig
 from wanderland_nav.scene.collision import CollisionSettings
@@ -149,7 +150,9 @@ class EpisodeSource:
 
 @dataclass
 class RenderSettings:
-    max_gaussians: Optional[int] = 10000  # level of detail (render/lod.py); null: all
+    # Level of detail (render/lod.py): each view renders the coarsest hierarchy nodes whose bounding sphere
+    # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
+    lod_px: Optional[float] = DEFAULT_LOD_PX
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
     backend: str = "torch"  # torch (packed eager) | compiled (torch.compile'd stages) | gsplat (CUDA extra)
 
@@ -253,7 +256,7 @@ class ReplayConfig:
     out: Optional[str] = None
     viewer: bool = False
     frames: str = "auto"  # auto | render | none
-    max_gaussians: Optional[int] = None
+    lod_px: Optional[float] = DEFAULT_LOD_PX  # as train's render.lod_px (the same camera); null: every Gaussian
     agents: Optional[List[int]] = None
     max_episodes: int = 8
     max_points: int = 50000

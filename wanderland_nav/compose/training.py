@@ -64,7 +64,7 @@ def _single_scene(c: TrainConfig):
 
     def envs(env_cfg):
         parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
-                     gaussians=scene_gaussians(scene, c.render.max_gaussians, needed=env_cfg.camera.enabled))
+                     gaussians=scene_gaussians(scene, c.render.lod_px, needed=env_cfg.camera.enabled))
         eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
                                               batch_size=c.eval.batch_size, **parts), **goal)()
         train = partial(env_factory, scene, env_cfg=env_cfg, split=c.train_env.split,
@@ -89,7 +89,7 @@ def _scene_set(c: TrainConfig):
     goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)
 
     def envs(env_cfg):
-        kw = dict(device=c.device, max_gaussians=c.render.max_gaussians)
+        kw = dict(device=c.device, lod_px=c.render.lod_px)
         train_scene_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.train_env.split, **kw), **goal)
         multi = partial(multi_scene_env_fn, list(paths), train_scene_env, batch_size=c.train_env.batch_size,
                         num_active=c.scene.set.num_active, device=c.device,

@@ -36,6 +36,7 @@ from wanderland_nav.episodes.schema import (
     save_episodes,
 )
 from wanderland_nav.geometry import wrap_angle
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +56,7 @@ class GeneratorSettings:
     goal_image_height: int = 240
     goal_image_hfov_deg: float = 90.0
     goal_camera_height: float | None = None  # metres above the ground; None: median capture-camera height
+    goal_image_lod_px: float | None = DEFAULT_LOD_PX  # the splat's level of detail for goal views (render/lod.py); None: all
     render_device: str = "cpu"
     decimals: int = 4  # rounding of every written coordinate (0.1 mm)
 
@@ -205,7 +207,7 @@ def _goal_images(scene, sampler: EndpointSampler, geo: _RouteGeometry, R_ns: np.
         scene.gaussians_path, np.stack([c[-1] for c in geo.corners_nav]), geo.yaw_goal, R_ns,
         [goal_image_dir / f"{i:05d}.png" for i in range(E)], height=height,
         width=settings.goal_image_width, image_height=settings.goal_image_height,
-        hfov_deg=settings.goal_image_hfov_deg, device=settings.render_device)
+        hfov_deg=settings.goal_image_hfov_deg, lod_px=settings.goal_image_lod_px, device=settings.render_device)
 
 
 def _instruction_texts(scene, instructions: InstructionGenerator, geo: _RouteGeometry, dense, indoor,

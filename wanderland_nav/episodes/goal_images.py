@@ -16,6 +16,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.geometry import agent_camera_poses, frustum_mask, invert_rigid, pinhole_intrinsics
+from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 log = logging.getLogger(__name__)
 
@@ -33,16 +34,18 @@ def goal_camera_poses(goals_nav: np.ndarray, yaws_nav: np.ndarray, nav_from_scen
 def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np.ndarray,
                        nav_from_scene: np.ndarray, out_paths: Sequence[Path], *, height: float,
                        width: int = 320, image_height: int = 240, hfov_deg: float = 90.0, pitch: float = 0.0,
-                       batch: int = 8, device: str = "cpu") -> list[Path | None]:
+                       batch: int = 8, lod_px: float | None = DEFAULT_LOD_PX, device: str = "cpu") -> list[Path | None]:
     """Render one PNG per goal into `out_paths` (atomic writes); returns the paths (all None, with a
     warning, when the scene has no Gaussians: `gaussians_path=None`).
 
-    goals_nav `[N, 3]` feet positions (nav frame), yaws_nav `[N]` headings (rad). The Gaussians are
-    loaded once and rendered `batch` cameras at a time (memory grows with C * H * W).
+    goals_nav `[N, 3]` feet positions (nav frame), yaws_nav `[N]` headings (rad). The splat is loaded
+    once, at the camera's level of detail `lod_px` (`render.lod`; None: every Gaussian, frustum-culled
+    per batch), and rendered `batch` cameras at a time (memory grows with C * H * W).
     """
     from PIL import Image
 
     from wanderland_nav.render import Gaussians, render
+    from wanderland_nav.render.lod import load_splat
 
     if len(out_paths) != len(goals_nav):
         raise ValueError(f"render_goal_images: {len(goals_nav)} goals but {len(out_paths)} output paths")
@@ -52,7 +55,7 @@ def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np
     if not Path(gaussians_path).is_file():
         raise FileNotFoundError(f"{gaussians_path}: Gaussian splats (3dgs.ply) not found; needed for goal images "
                                 "(set goal_images=false to skip them)")
-    g = Gaussians.load(gaussians_path).to(device)
+    g = load_splat(gaussians_path, lod_px, device=device)
     world_from_cam = goal_camera_poses(goals_nav, yaws_nav, nav_from_scene, height=height, pitch=pitch)
     cam_from_world = invert_rigid(world_from_cam).to(device=device, dtype=torch.float32)  # [N, 4, 4]
     K = torch.as_tensor(pinhole_intrinsics(width, image_height, hfov_deg), dtype=torch.float32, device=device)
@@ -61,8 +64,11 @@ def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np
         for i in range(0, len(out_paths), batch):
             vm = cam_from_world[i:i + batch]
             Ks = K.expand(len(vm), 3, 3)
-            keep = frustum_mask(g.means, g.log_scales, vm, Ks, width, image_height)  # culling first: ~4x per view
-            out = render(g[keep], vm, Ks, width, image_height, render_mode="RGB")
+            if isinstance(g, Gaussians):  # every Gaussian: cull to the frustum first (~4x per view)
+                out = render(g[frustum_mask(g.means, g.log_scales, vm, Ks, width, image_height)], vm, Ks, width,
+                             image_height, render_mode="RGB")
+            else:  # the hierarchy culls and cuts per view
+                out = render(g, vm, Ks, width, image_height, render_mode="RGB")
             rgb = (out.rgb.clamp(0, 1) * 255).round().to(torch.uint8).cpu().numpy()  # [C, H, W, 3]
             for img, p in zip(rgb, out_paths[i:i + batch]):
                 with atomic_path(p) as tmp:

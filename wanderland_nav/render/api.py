@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from .gaussians import Gaussians
+from .hierarchy import GaussianHierarchy
 from .packed import project_packed
 from .projection import CAMERA_MODELS, project_gaussians, quat_scale_to_covar
 from .rasterize import DEFAULT_CHUNK_ELEMS, rasterize_packed, rasterize_to_pixels
@@ -290,7 +291,7 @@ def _as_tensor(x, like: torch.Tensor, name: str, shape_tail: tuple) -> torch.Ten
 
 
 def render(
-    gaussians: Gaussians,
+    gaussians: Gaussians | GaussianHierarchy,
     cam_from_world,  # [C, 4, 4] (or [4, 4]) tensor/array, OpenCV axes
     K,  # [C, 3, 3] (or [3, 3])
     width: int,
@@ -308,11 +309,14 @@ def render(
 ) -> RenderOutput:
     """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1].
 
+    A `GaussianHierarchy` renders each camera's own cut at its `target_px` (`hierarchy.py`): the level of
+    detail every simulator camera uses; plain `Gaussians` render all of them (the differentiable reference).
+
     backend: "torch" (the packed eager fast path), "compiled" (its torch.compile'd hot stages) or
     "gsplat" (gsplat's CUDA kernels, optional extra). All three take the same arguments.
     """
     _check(backend in BACKENDS, f"backend must be one of {BACKENDS}, got {backend!r}")
-    g = gaussians
+    g = gaussians.leaves if isinstance(gaussians, GaussianHierarchy) else gaussians
     viewmats = _as_tensor(cam_from_world, g.means, "cam_from_world", (4, 4))
     Ks = _as_tensor(K, g.means, "K", (3, 3))
     if Ks.shape[0] == 1 and viewmats.shape[0] > 1:
@@ -325,15 +329,38 @@ def render(
     raster = rasterization
     if backend == "gsplat":
         from .gsplat_backend import gsplat_rasterization as raster
-    covars = None if backend == "gsplat" else g.covariances()  # cached for a fixed scene (`Gaussians.covariances`)
-    colors, alphas, _ = raster(
-        g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
-        near_plane=near_plane, far_plane=far_plane, sh_degree=deg, backgrounds=bgs, render_mode=render_mode,
-        rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
-        compiled=backend == "compiled", covars=covars)
+    opts = dict(near_plane=near_plane, far_plane=far_plane, sh_degree=deg, render_mode=render_mode,
+                rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
+                compiled=backend == "compiled")
+    if isinstance(gaussians, GaussianHierarchy):
+        colors, alphas = _render_cut(raster, gaussians, viewmats, Ks, width, height, bgs, **opts)
+    else:
+        covars = None if backend == "gsplat" else g.covariances()  # cached for a fixed scene (`Gaussians.covariances`)
+        colors, alphas, _ = raster(g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
+                                   backgrounds=bgs, covars=covars, **opts)
     rgb = depth = None
     if render_mode.startswith("RGB"):
         rgb = colors[..., :3].clamp(0.0, 1.0)
     if render_mode != "RGB":
         depth = colors[..., -1:]
     return RenderOutput(rgb, depth, alphas)
+
+
+@torch.no_grad()
+def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, **opts):
+    """Each camera renders its own cut of `h`: the C cameras become C one-camera scenes (gsplat's leading
+    batch dimension), each holding its cut padded to the longest with transparent rows."""
+    C = viewmats.shape[0]
+    cam, node = h.cut(viewmats, Ks, width, height, h.target_px, near_plane=opts["near_plane"],
+                      camera_model=opts["camera_model"])
+    counts = torch.bincount(cam, minlength=C)
+    slot = torch.arange(cam.numel(), device=cam.device) - (torch.cumsum(counts, 0) - counts)[cam]
+    idx = torch.full((C, max(int(counts.max()) if C else 1, 1)), -1, dtype=torch.long, device=cam.device)
+    idx[cam, slot] = node
+    valid = idx >= 0
+    means, covars, opac, sh = h.gather(idx.clamp_min(0).view(-1))
+    M = idx.shape[1]
+    colors, alphas, _ = raster(means.view(C, M, 3), None, None, opac.view(C, M) * valid, sh.view(C, M, *sh.shape[1:]),
+                               viewmats[:, None], Ks[:, None], width, height, covars=covars.view(C, M, 3, 3),
+                               backgrounds=None if bgs is None else bgs[:, None], **opts)
+    return colors[:, 0], alphas[:, 0]

@@ -203,7 +203,7 @@ class Gaussians:
         cols: list[tuple[str, np.ndarray]] = []
 
         def add(prefix_names: list[str], arr: torch.Tensor):
-            a = arr.detach().to("cpu", torch.float32).numpy().reshape(n, -1)
+            a = arr.detach().to("cpu", torch.float32).numpy().reshape(n, len(prefix_names))
             for i, name in enumerate(prefix_names):
                 cols.append((name, a[:, i]))
 

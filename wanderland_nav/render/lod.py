@@ -1,28 +1,59 @@
-"""Level of detail: the `max_gaussians` splats that matter most, for CPU-speed training and evaluation.
+"""Level of detail for every camera: the splat's Gaussian hierarchy, built once and cached beside it.
 
-Why: the pure-torch rasteriser's cost grows with the Gaussians per tile; on a 2-core CPU the full tiny
-demo (54k) renders ~1 agent-frame/s, a 10k subset several times faster with the same layout and
-colours. Training, evaluation and replay use this one selection, so their numbers and images agree.
+`load_splat(path, lod_px)` is how the framework loads a splat to render: a `GaussianHierarchy` cut per
+view at `lod_px` pixels (`hierarchy.py`; `render()` takes it in place of `Gaussians`), or, with
+`lod_px=None`, all Gaussians (the differentiable reference). The hierarchy is cached as
+`<splat stem>.lod.npz` beside the splat, keyed by the splat's sha256 and the format version, written
+atomically, and rebuilt when either changes. A folder that cannot be written keeps its cache in
+`$WANDERLAND_CACHE` (default `~/.cache/wanderland_nav`) under the splat's hash, and says so.
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import time
+from pathlib import Path
 
 import torch
 
-from wanderland_nav.render.gaussians import Gaussians
+from .gaussians import Gaussians
+from .hierarchy import GaussianHierarchy, build_hierarchy, file_sha256, load_nodes, save_nodes
 
 log = logging.getLogger(__name__)
 
+# Pixels (bounding-sphere radius) a node may project to before the cut descends into its children: at 1 px
+# the cut stays >= 30 dB PSNR from the full render on the demo scenes and the paper-size stress scene at
+# 32-128 px (experiments/render/README.md).
+DEFAULT_LOD_PX = 1.0
 
-def lod_subset(gaussians: Gaussians, max_gaussians: int | None) -> Gaussians:
-    """`gaussians`, or the `max_gaussians` with the largest opacity x footprint
-    (sigmoid(opacity) * exp(sum of the two largest log-scales)), in their original order. None keeps all."""
-    if max_gaussians is None or len(gaussians) <= int(max_gaussians):
-        return gaussians
-    g = gaussians
-    score = torch.sigmoid(g.opacity_logits.view(-1)) * torch.exp(g.log_scales.topk(2, dim=-1).values.sum(-1))
-    keep = score.topk(int(max_gaussians)).indices.sort().values
-    log.info("rendering %d of %d Gaussians (max_gaussians)", len(keep), len(g))
-    return g[keep]
+
+def cache_path(splat: Path, sha256: str) -> Path:
+    """Where the hierarchy of `splat` lives: beside it when its folder is writable, else the user cache."""
+    if os.access(splat.parent, os.W_OK):
+        return splat.with_name(f"{splat.stem}.lod.npz")
+    root = Path(os.environ.get("WANDERLAND_CACHE", Path.home() / ".cache" / "wanderland_nav"))
+    return root / "lod" / f"{sha256[:32]}.lod.npz"
+
+
+def load_splat(path: str | os.PathLike, lod_px: float | None = DEFAULT_LOD_PX, *, device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:
+    """The splat at `path` as the camera renders it: its hierarchy cut at `lod_px` pixels, or (None) all Gaussians."""
+    path = Path(path)
+    leaves = Gaussians.load(path)
+    if len(leaves) == 0:
+        raise ValueError(f"{path}: the splat has no Gaussians; a camera would render empty frames "
+                         "(turn the camera off with env.camera.enabled=false)")
+    if lod_px is None:
+        return leaves.to(device)
+    if not lod_px >= 0:
+        raise ValueError(f"render.lod_px must be >= 0 pixels or null (all Gaussians), got {lod_px}")
+    sha = file_sha256(path)
+    where = cache_path(path, sha)
+    nodes = load_nodes(where, source_sha256=sha) if where.is_file() else None
+    if nodes is None:
+        t = time.perf_counter()
+        nodes = build_hierarchy(leaves).nodes
+        save_nodes(where, nodes, source_sha256=sha)
+        log.info("%s: built the Gaussian hierarchy (%d Gaussians, %d merged nodes) in %.1f s -> %s",
+                 path, len(leaves), nodes.means.shape[0], time.perf_counter() - t, where)
+    return GaussianHierarchy(leaves, nodes, lod_px).to(device)

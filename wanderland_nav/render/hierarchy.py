@@ -1,0 +1,384 @@
+"""A Gaussian hierarchy and its per-view cut: level of detail whose cost is bounded by the image.
+
+Why: a small camera cannot resolve most of a large splat, yet dropping splats (a top-k subset) deletes
+whole surfaces. Following the hierarchical 3DGS idea (Kerbl et al. 2024; Octree-GS and CityGaussian cut
+octree levels the same way), Gaussians are merged bottom-up into a tree whose every interior node is the
+moment-matched merge of its children, and each view renders the coarsest nodes that project to at most
+`target_px` pixels. A 32-px camera then sees a faithful blur of the whole scene, and the work per view
+follows its pixels, not the scene's size.
+
+Tree: node ids `0..N-1` are the splat's Gaussians (the leaves, in file order), `N..T-1` the interior
+nodes, level by level, the root last. The levels are an octree over the splat's bounding cube (cells
+are Morton-code prefixes): a node merges the items of one cell, so siblings lie within one cube and a
+node's extent is bounded by its cell and its children's extents. Every node carries a bounding sphere
+that contains its children's spheres (leaves: 3.33 standard deviations, the renderer's own extent), so
+"too big to merge" and "visible" are monotone down the tree and a breadth-first descent finds the cut.
+
+Merge of children i with activated opacity a_i and footprint area A_i (pi * product of the two largest
+standard deviations): weights w_i = a_i A_i; mean and covariance by moment matching
+(mu = sum w mu_i / W, Sigma = sum w (Sigma_i + d_i d_i^T) / W); SH coefficients weighted alike (they are
+linear in colour); opacity min(1, W / A) so that the parent, seen from afar, covers the area its
+children cover.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .gaussians import Gaussians
+from .packed import RADIUS_SIGMAS
+
+FORMAT_VERSION = 2
+MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [children, K, 3] temporaries)
+START_NODES = 256  # each view's descent starts at the largest level of at most this many nodes
+CULL_MARGIN_PX = 4.0  # the frustum is widened by this many pixels: the renderer's eps2d blur and +1 px bound
+
+
+@dataclass
+class InteriorNodes:
+    """The merged nodes (ids N..T-1) and the tree's structure; what the cache file stores.
+
+    means [I, 3], covars [I, 3, 3], opacities [I] (activated), sh [I, K, 3]; radius [T] (every node's
+    bounding sphere); child_ptr [I + 1] and child_ids [T - 1]: interior node j's children are
+    child_ids[child_ptr[j]:child_ptr[j + 1]].
+    """
+
+    means: torch.Tensor
+    covars: torch.Tensor
+    opacities: torch.Tensor
+    sh: torch.Tensor
+    radius: torch.Tensor
+    child_ptr: torch.Tensor
+    child_ids: torch.Tensor
+
+    def to(self, device) -> "InteriorNodes":
+        return InteriorNodes(*(getattr(self, f.name).to(device) for f in fields(self)))
+
+
+class GaussianHierarchy:
+    """The leaves (a `Gaussians`) plus their `InteriorNodes`; `cut` picks nodes per view, `gather` reads them."""
+
+    def __init__(self, leaves: Gaussians, nodes: InteriorNodes, target_px: float = 1.0):
+        if not target_px >= 0:
+            raise ValueError(f"GaussianHierarchy: target_px must be >= 0 (pixels), got {target_px}")
+        self.leaves, self.nodes, self.target_px = leaves, nodes, float(target_px)
+        self.num_leaves = len(leaves)
+        self.root = self.num_leaves + nodes.means.shape[0] - 1 if nodes.means.shape[0] else 0
+        self._start: torch.Tensor | None = None
+        self._leaf_opacities = leaves.opacities.detach()
+
+    def __len__(self) -> int:
+        """The splat's Gaussians (the leaves), as `len(Gaussians)`; `num_nodes` counts the merged ones too."""
+        return self.num_leaves
+
+    @property
+    def num_nodes(self) -> int:
+        return self.num_leaves + self.nodes.means.shape[0]
+
+    def start_nodes(self, most: int = START_NODES) -> torch.Tensor:
+        """Where each view's descent starts: the cut below the root expanded level by level while it holds
+        at most `most` nodes. Views expand those top levels anyway whenever they need detail; a view that
+        would stop above them gets this cut instead (finer, never coarser)."""
+        if self._start is None:
+            N, frontier = self.num_leaves, torch.tensor([self.root], device=self.nodes.radius.device)
+            while bool((frontier >= N).any()):
+                inner = frontier >= N
+                _, kids = self._children(frontier[inner], frontier[inner] - N)
+                nxt = torch.cat([frontier[~inner], kids])
+                if nxt.numel() > most:
+                    break
+                frontier = nxt
+            self._start = frontier
+        return self._start
+
+    @property
+    def device(self) -> torch.device:
+        return self.leaves.device
+
+    @property
+    def sh_degree(self) -> int:
+        return self.leaves.sh_degree
+
+    def to(self, device) -> "GaussianHierarchy":
+        return GaussianHierarchy(self.leaves.to(device), self.nodes.to(device), self.target_px)
+
+    def with_target(self, target_px: float) -> "GaussianHierarchy":
+        """The same tree, cut at another projected size (pixels)."""
+        return GaussianHierarchy(self.leaves, self.nodes, target_px)
+
+    @torch.no_grad()
+    def gather(self, ids: torch.Tensor):
+        """Activated parameters of nodes `ids [M]`: means [M,3], covars [M,3,3], opacities [M], sh [M,K,3]."""
+        N, g, n = self.num_leaves, self.leaves, self.nodes
+        leaf = ids < N
+        li, ni = ids[leaf], ids[~leaf] - N
+        M, K = ids.shape[0], n.sh.shape[1]
+        means = g.means.new_empty(M, 3)
+        covars = g.means.new_empty(M, 3, 3)
+        opac = g.means.new_empty(M)
+        sh = g.means.new_empty(M, K, 3)
+        means[leaf], means[~leaf] = g.means.detach()[li], n.means[ni]
+        covars[leaf], covars[~leaf] = g.covariances()[li], n.covars[ni]
+        opac[leaf], opac[~leaf] = self._leaf_opacities[li], n.opacities[ni]
+        sh[leaf] = torch.cat([g.sh_dc.detach()[li, None], g.sh_rest.detach()[li]], 1)
+        sh[~leaf] = n.sh[ni]
+        return means, covars, opac, sh
+
+    @torch.no_grad()
+    def as_gaussians(self, ids: torch.Tensor) -> Gaussians:
+        """Nodes `ids [M]` as raw `Gaussians` (covariances factored into rotation and log-scales): a cut
+        saved as a PLY, or handed to code that takes plain Gaussians, renders as the cut does."""
+        means, covars, opac, sh = self.gather(ids)
+        ev, vec = torch.linalg.eigh(covars.double())  # ascending eigenvalues, orthonormal columns
+        vec[..., 2] *= torch.linalg.det(vec).sign()[:, None]  # a proper rotation
+        quats = _rotation_to_quat(vec).to(means.dtype)
+        log_scales = (0.5 * torch.log(ev.clamp_min(1e-30))).to(means.dtype)
+        logits = torch.logit(opac.clamp(1e-7, 1 - 1e-7))
+        return Gaussians(means, log_scales, quats, logits, sh[:, 0].contiguous(), sh[:, 1:].contiguous())
+
+    @torch.no_grad()
+    def cut(self, viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int, target_px: float,
+            *, near_plane: float = 0.01, camera_model: str = "pinhole") -> tuple[torch.Tensor, torch.Tensor]:
+        """Per camera, the coarsest visible nodes whose bounding sphere projects to at most `target_px`
+        pixels (radius); leaves wherever nothing coarser is small enough. -> (camera [M], node [M]),
+        grouped by camera. viewmats [C, 4, 4] cam_from_world, Ks [C, 3, 3].
+
+        `target_px = 0` yields every leaf that can touch the image (the renderer culls the rest alike).
+        Interior nodes are culled on their spheres against the frustum widened by `CULL_MARGIN_PX`
+        (pinhole only; other models cull behind the near plane only)."""
+        N, n = self.num_leaves, self.nodes
+        C = viewmats.shape[0]
+        R, t = viewmats[:, :3, :3].to(n.radius.dtype), viewmats[:, :3, 3].to(n.radius.dtype)
+        f = torch.maximum(Ks[:, 0, 0], Ks[:, 1, 1]).to(n.radius.dtype)
+        start = self.start_nodes().to(viewmats.device)
+        cam = torch.arange(C, device=viewmats.device).repeat_interleave(start.numel())
+        node = start.repeat(C)
+        picked_cam, picked_node = [], []
+        while cam.numel():
+            leaf = node < N
+            mu = torch.empty(node.shape[0], 3, dtype=n.radius.dtype, device=node.device)
+            mu[leaf], mu[~leaf] = self.leaves.means.detach()[node[leaf]].to(mu.dtype), n.means[node[~leaf] - N]
+            pc = torch.einsum("pij,pj->pi", R[cam], mu) + t[cam]  # [P, 3] camera frame
+            r = n.radius[node]
+            x, y, z = pc.unbind(-1)
+            visible = z + r >= near_plane
+            if camera_model == "pinhole":
+                visible &= _inside_planes(x, y, z, r, Ks[cam].to(r.dtype), width, height)
+            dist = pc.norm(dim=-1)
+            if camera_model == "pinhole":  # radial magnification f d / z^2 off-axis, at the sphere's nearest depth
+                size = f[cam] * r * dist / (z.clamp_min(1e-6) * (z - r).clamp_min(1e-6))
+                close = z - r <= near_plane
+            else:
+                size = f[cam] * r / (dist - r).clamp_min(1e-6)
+                close = dist - r <= near_plane
+            expand = visible & ~leaf & (close | (size > target_px))
+            keep = visible & ~expand
+            picked_cam.append(cam[keep])
+            picked_node.append(node[keep])
+            cam, node = self._children(cam[expand], node[expand] - N)
+        cam, node = torch.cat(picked_cam), torch.cat(picked_node)
+        order = torch.argsort(cam, stable=True)
+        return cam[order], node[order]
+
+    def _children(self, cam: torch.Tensor, interior: torch.Tensor):
+        """(camera, child) pairs for every child of the interior nodes `interior [P]` (ids minus N)."""
+        ptr = self.nodes.child_ptr
+        start, count = ptr[interior], ptr[interior + 1] - ptr[interior]
+        total = int(count.sum())
+        first = torch.repeat_interleave(start - (torch.cumsum(count, 0) - count), count)
+        return torch.repeat_interleave(cam, count), self.nodes.child_ids[first + torch.arange(total, device=cam.device)]
+
+
+def _inside_planes(x, y, z, r, Ks, width: int, height: int) -> torch.Tensor:
+    """Sphere (centre x, y, z camera frame, radius r; [P] each) meets the pinhole frustum widened by
+    `CULL_MARGIN_PX` pixels on each side: its signed distance to each side plane is below r."""
+    fx, fy, cx, cy = Ks[:, 0, 0], Ks[:, 1, 1], Ks[:, 0, 2], Ks[:, 1, 2]
+    m = CULL_MARGIN_PX
+    ok = torch.ones_like(z, dtype=torch.bool)
+    # plane through the optical centre: u = c + s * lim  <=>  a*z - s*x = 0 with a the tangent of the edge
+    for coord, f, lo, hi in ((x, fx, cx + m, width - cx + m), (y, fy, cy + m, height - cy + m)):
+        for tan, sign in ((hi / f, 1.0), (lo / f, -1.0)):
+            ok &= (sign * coord - tan * z) / torch.sqrt(1 + tan * tan) <= r
+    return ok
+
+
+def _rotation_to_quat(R: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices `[M, 3, 3]` -> unit wxyz quaternions `[M, 4]` (the largest of the four
+    candidate denominators per matrix, so no division by a small number)."""
+    m = R.reshape(-1, 9).unbind(-1)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = m
+    cand = torch.stack([
+        torch.stack([1 + r00 + r11 + r22, r21 - r12, r02 - r20, r10 - r01], -1),
+        torch.stack([r21 - r12, 1 + r00 - r11 - r22, r01 + r10, r02 + r20], -1),
+        torch.stack([r02 - r20, r01 + r10, 1 - r00 + r11 - r22, r12 + r21], -1),
+        torch.stack([r10 - r01, r02 + r20, r12 + r21, 1 - r00 - r11 + r22], -1),
+    ], 1)  # [M, 4, 4]: row k is 4 q_k q (unnormalised)
+    best = torch.stack([cand[:, k, k] for k in range(4)], -1).argmax(-1)
+    q = cand[torch.arange(R.shape[0]), best]
+    return torch.nn.functional.normalize(q, dim=-1)
+
+
+# ---- building ------------------------------------------------------------------------------------
+
+MORTON_BITS = 21  # per axis: 63-bit codes
+
+
+def morton_codes(means: torch.Tensor) -> torch.Tensor:
+    """63-bit Z-order codes `[N]` (int64) of `means [N, 3]` on a cubic grid over their bounding box, so
+    that a code prefix of 3 l bits names a cube (an octree cell) of side `extent / 2^l`."""
+    lo = means.min(0).values
+    extent = float((means.max(0).values - lo).max().clamp_min(1e-12))
+    top = 2**MORTON_BITS - 1
+    q = ((means - lo) / extent * top).round().long().clamp_(0, top)
+
+    def spread(v: torch.Tensor) -> torch.Tensor:  # insert two zero bits between each of 21 bits
+        v = (v | (v << 32)) & 0x1F00000000FFFF
+        v = (v | (v << 16)) & 0x1F0000FF0000FF
+        v = (v | (v << 8)) & 0x100F00F00F00F00F
+        v = (v | (v << 4)) & 0x10C30C30C30C30C3
+        return (v | (v << 2)) & 0x1249249249249249
+
+    return spread(q[:, 0]) | (spread(q[:, 1]) << 1) | (spread(q[:, 2]) << 2)
+
+
+def _area(covars: torch.Tensor) -> torch.Tensor:
+    """pi x product of the two largest standard deviations of `covars [..., 3, 3]` (the footprint seen face-on)."""
+    ev = torch.linalg.eigvalsh(covars.double()).clamp_min(0).to(covars.dtype)  # ascending
+    return torch.pi * torch.sqrt(ev[..., 1] * ev[..., 2])
+
+
+def _merge(rows, group: torch.Tensor, P: int):
+    """Merge the children `rows` (means [n,3], covars [n,3,3], opacities [n], sh [n,K,3], radius [n]) into
+    `P` parents; `group [n]` (sorted) is each child's parent. -> the parents' rows, in the same layout."""
+    means, covars, opac, sh, radius = rows
+    mass = opac * _area(covars)  # [n]
+    seg = lambda x: x.new_zeros((P,) + x.shape[1:]).index_add_(0, group, x)  # noqa: E731  segment sums
+    W = seg(mass)
+    flat = (W <= 0)[group]  # all children transparent or flat: equal weights
+    w = torch.where(flat, torch.ones_like(mass), mass)
+    w = w / seg(w)[group]
+    mu = seg(w[:, None] * means)
+    d = means - mu[group]
+    cov = seg(w[:, None, None] * (covars + d[:, :, None] * d[:, None, :]))
+    sh_p = seg(w[:, None, None] * sh)
+    alpha = (W / _area(cov).clamp_min(1e-20)).clamp(max=1.0)
+    rad = radius.new_zeros(P).scatter_reduce_(0, group, d.norm(dim=-1) + radius, "amax")
+    return mu, cov, alpha, sh_p, rad
+
+
+@torch.no_grad()
+def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHierarchy:
+    """Merge `gaussians` bottom-up along an octree: level l's nodes are the cubes of side extent / 2^(21-l)
+    (Morton-code prefixes) holding two or more items of the level below; a cube with one item passes it up
+    unchanged. Batched per level; `MERGE_CHUNK` parents merged at a time bounds the temporaries."""
+    g = gaussians.detach()
+    N = len(g)
+    if N == 0:
+        raise ValueError("build_hierarchy: the splat has no Gaussians")
+    leaf_radius = RADIUS_SIGMAS * g.scales.max(-1).values
+    leaf_cov, leaf_opac = g.covariances(), g.opacities
+    code = morton_codes(g.means)
+    order = torch.argsort(code, stable=True)
+    items, code = order, code[order]  # the current level's node ids in Morton order, and their cells' codes
+    levels: list[tuple] = []  # rows (means, covars, opacities, sh, radius) of each level's new nodes
+    child_runs: list[torch.Tensor] = []  # per level: the children of its new nodes, in parent order
+    counts: list[torch.Tensor] = []  # per level: children per new node
+    next_id = N
+
+    def rows(ids: torch.Tensor):
+        """Rows of node ids (leaves and earlier levels' nodes, mixed) in the merge layout."""
+        leaf = ids < N
+        parts = [(leaf, ids[leaf], (g.means, leaf_cov, leaf_opac, None, leaf_radius))]
+        first = N
+        for lv in levels:  # each earlier level's new nodes hold a contiguous id range
+            m = (ids >= first) & (ids < first + lv[0].shape[0])
+            parts.append((m, ids[m] - first, lv))
+            first += lv[0].shape[0]
+        n, K = ids.shape[0], g.sh_rest.shape[1] + 1
+        out = [g.means.new_empty(n, 3), g.means.new_empty(n, 3, 3), g.means.new_empty(n), g.means.new_empty(n, K, 3),
+               g.means.new_empty(n)]
+        for mask, local, src in parts:
+            if not bool(mask.any()):
+                continue
+            for i in range(5):
+                if i == 3 and src[3] is None:  # leaf SH: DC and rest are stored apart
+                    out[3][mask] = torch.cat([g.sh_dc[local, None], g.sh_rest[local]], 1)
+                else:
+                    out[i][mask] = src[i][local]
+        return out
+
+    for _ in range(MORTON_BITS):
+        if items.numel() == 1:
+            break
+        cell = code >> 3  # the parent cube of each item's cell
+        _, size = torch.unique_consecutive(cell, return_counts=True)
+        start = torch.cumsum(size, 0) - size
+        multi = size > 1
+        if not bool(multi.any()):
+            code = cell
+            continue
+        # the children of this level's new nodes: the items of the multi-item cells, in order
+        in_multi = torch.repeat_interleave(multi, size)
+        kids = items[in_multi]
+        P = int(multi.sum())
+        group = torch.repeat_interleave(torch.arange(P), size[multi])
+        parts, bounds = [], torch.cat([torch.searchsorted(group, torch.arange(0, P, MERGE_CHUNK)), torch.tensor([kids.numel()])])
+        for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            gi = group[a:b]
+            parts.append(_merge(rows(kids[a:b]), gi - gi[0], int(gi[-1] - gi[0]) + 1))
+        levels.append(tuple(torch.cat([p[i] for p in parts]) for i in range(5)))
+        child_runs.append(kids)
+        counts.append(size[multi])
+        new_ids = torch.full_like(size, -1)
+        new_ids[multi] = torch.arange(next_id, next_id + P)
+        new_ids[~multi] = items[start[~multi]]  # single items pass up unchanged
+        next_id += P
+        items, code = new_ids, cell[start]
+    cat = lambda i, empty: torch.cat([lv[i] for lv in levels]) if levels else empty  # noqa: E731
+    K = g.sh_rest.shape[1] + 1
+    nodes = InteriorNodes(
+        means=cat(0, g.means.new_zeros(0, 3)), covars=cat(1, g.means.new_zeros(0, 3, 3)),
+        opacities=cat(2, g.means.new_zeros(0)), sh=cat(3, g.means.new_zeros(0, K, 3)),
+        radius=torch.cat([leaf_radius, cat(4, g.means.new_zeros(0))]),
+        child_ptr=torch.cat([torch.zeros(1, dtype=torch.long), torch.cumsum(torch.cat(counts), 0)]) if counts
+        else torch.zeros(1, dtype=torch.long),
+        child_ids=torch.cat(child_runs) if child_runs else torch.zeros(0, dtype=torch.long))
+    return GaussianHierarchy(gaussians, nodes, target_px)
+
+
+# ---- the cache beside the splat ---------------------------------------------------------------------
+
+def file_sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 24), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save_nodes(path: Path, nodes: InteriorNodes, *, source_sha256: str) -> None:
+    """Write `nodes` as an uncompressed npz, atomically, with the splat's hash and the build settings."""
+    from wanderland_nav.atomic import atomic_path
+
+    arrays = {f.name: getattr(nodes, f.name).cpu().numpy() for f in fields(nodes)}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays, source_sha256=np.array(source_sha256),
+                     format_version=np.array(FORMAT_VERSION))
+
+
+def load_nodes(path: Path, *, source_sha256: str) -> InteriorNodes | None:
+    """The cached nodes when `path` holds a hierarchy of this splat (same hash and format); else None."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["source_sha256"]) != source_sha256 or int(z["format_version"]) != FORMAT_VERSION:
+                return None
+            return InteriorNodes(*(torch.from_numpy(np.array(z[f.name])) for f in fields(InteriorNodes)))
+    except (OSError, KeyError, ValueError):
+        return None
