@@ -7,7 +7,7 @@ Builds (or reuses) the procedural demo block the main job trains in, prepares it
 navmesh, samples expert episodes with the main job's generator (seed 0) and picks the first one whose
 shortest path bends (a straight path would show little of the planner). The camera frame is rendered by
 the same `AgentCamera` the environment uses, from the episode's start facing the first leg of its expert
-path, at `--size` px from `--max-gaussians` Gaussians (the main job trains at 32 px from a 10k subset; the
+path, at `--size` px from all Gaussians (or the level of detail `--lod-px`; the main job trains at 32 px; the
 picture is larger so it reads on a page). Prints the episode's id, geodesic length and path corners.
 """
 
@@ -26,8 +26,8 @@ from planners import NavMesh
 from wanderland_nav.envs.camera import AgentCamera
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.episodes.generate import GeneratorSettings, generate_episodes
-from wanderland_nav.render import Gaussians, render
-from wanderland_nav.render.lod import lod_subset
+from wanderland_nav.render import render
+from wanderland_nav.render.lod import load_splat
 from wanderland_nav.scene_preparation import ensure_demo_scene
 from wanderland_nav.viz.topdown import plot_topdown
 
@@ -50,14 +50,14 @@ def crop_margin(img: np.ndarray, pad: int = 4) -> np.ndarray:
     return img[max(0, y0 - pad):y1 + pad + 1, max(0, x0 - pad):x1 + pad + 1]
 
 
-def start_view(scene, episode, size: int, max_gaussians: int | None) -> np.ndarray:
+def start_view(scene, episode, size: int, lod_px: float | None) -> np.ndarray:
     """-> uint8 `[size, size, 3]`: the agent camera at the episode start, facing along the first path leg."""
     R = np.asarray(scene.nav_from_scene, dtype=np.float64)  # scene -> nav frame (z up)
     path = np.asarray(episode.reference_path, dtype=np.float64)[:, :3] @ R.T  # [P, 3] nav frame
     leg = path[1, :2] - path[0, :2]
     yaw = float(np.arctan2(leg[1], leg[0]))
     cfg = dataclasses.replace(CameraConfig(), width=size, height=size)
-    gaussians = lod_subset(Gaussians.load(scene.gaussians_path), max_gaussians)
+    gaussians = load_splat(scene.gaussians_path, lod_px)
     cam = AgentCamera(cfg, scene.nav_from_scene, render, gaussians, "cpu")
     rgb, _ = cam.render(torch.as_tensor(path[:1], dtype=torch.float32), torch.tensor([yaw], dtype=torch.float32))
     return rgb[0].numpy()
@@ -68,7 +68,7 @@ def main(argv=None) -> None:
     ap.add_argument("--scene", type=Path, default=Path("data/scenes/demo"))
     ap.add_argument("--out", type=Path, default=Path("docs/images/front_page.png"))
     ap.add_argument("--size", type=int, default=192)
-    ap.add_argument("--max-gaussians", type=int, default=None, help="LOD subset; default: all Gaussians")
+    ap.add_argument("--lod-px", type=float, default=None, help="level of detail in pixels; default: all Gaussians")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
 
@@ -77,7 +77,7 @@ def main(argv=None) -> None:
     episodes, _ = generate_episodes(scene, navmesh, num_episodes=20, seed=a.seed,
                                     settings=GeneratorSettings(goal_images=False))
     ep = pick_episode(episodes)
-    frame = start_view(scene, ep, a.size, a.max_gaussians)
+    frame = start_view(scene, ep, a.size, a.lod_px)
 
     with tempfile.TemporaryDirectory() as tmp:
         top = plot_topdown(Path(tmp) / "top.png", nav_from_scene=scene.nav_from_scene,
