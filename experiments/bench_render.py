@@ -147,7 +147,7 @@ def _child(cfg: dict) -> dict:
             return orig(*args)
 
         R.forward_chunk = counting
-    else:  # be6d50d
+    else:  # the older layout
         orig_raw = R._alpha_raw
 
         def counting(geo, q):  # noqa: F811
