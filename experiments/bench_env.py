@@ -7,9 +7,7 @@
 `--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
 CPU-bound busy-loop processes for the duration (the "other jobs on the machine" case); they are ended
 at exit. `--repeats R` times each row R times and prints the best and the median.
-`--render-threads N` sets `camera.render_threads` (default: the CPU cores; before 2026-11-24 23:15:
-torch's intra-op thread count, so `--threads 1 --render-threads 2` was needed for "one intra-op thread
-for everything but the render groups").
+`--render-threads N` sets `camera.render_threads` (default: the CPU cores).
 `--policy NAME` (conf/policy/NAME.yaml) also times that policy on the env's observations each step:
 a no-grad forward at B (collection; `pol ms` column) and a forward + backward on a minibatch of
 `--minibatch` rows (a PPO update's unit; `upd ms`), both excluded from the env's frames/s.

@@ -6,8 +6,8 @@ by 1% of the object extent; C cameras orbit it at 1.3x its extent, looking at it
 
 Each configuration runs in a fresh subprocess so `ru_maxrss` gives its own peak; we report the peak
 resident memory *added* by rendering (above the loaded scene + interpreter) and the total.
-Timings: best of `--repeat` runs, both wall clock and process CPU time. The machine is shared with
-other engineers, so wall times are noisy; CPU time of a 1-thread run is the most stable figure.
+Timings: best of `--repeat` runs, both wall clock and process CPU time. On a shared machine
+wall times are noisy; CPU time of a 1-thread run is the most stable figure.
 
 A "straightforward" baseline (per-tile Python loop, dense autograd over each tile's whole sorted list,
 no chunking, no early termination, no custom backward) is included for comparison on the same
@@ -137,17 +137,17 @@ def _child(cfg: dict) -> dict:
     dev = cfg["device"]
     g, V, K = _scene(cfg["n"], cfg["C"], cfg["size"], dev)
     evals = [0]
-    if hasattr(R, "forward_chunk"):  # a83eb0b on: the forward's chunk kernel (pixels x entries evaluated)
+    if hasattr(R, "forward_chunk"):  # the forward's chunk kernel (pixels x entries evaluated)
         orig = R.forward_chunk
 
-        def counting(*args):  # (q [6, Ta, L], cols, T_in, coords, ...); before 2026-11-24 22:45 (rows [Ta, L, K], ...)
+        def counting(*args):  # (q [6, Ta, L], cols, T_in, coords, ...); an older layout: (rows [Ta, L, K], ...)
             q, coords = args[0], args[3] if args[0].dim() == 3 and args[0].shape[0] == 6 else args[4]
             evals[0] += coords.numel() ** 2 * q.shape[-2] * q.shape[-1] if q.shape[0] == 6 else \
                 coords.numel() ** 2 * q.shape[0] * q.shape[1]
             return orig(*args)
 
         R.forward_chunk = counting
-    else:  # be6d50d
+    else:  # the older layout
         orig_raw = R._alpha_raw
 
         def counting(geo, q):  # noqa: F811

@@ -13,18 +13,15 @@ the real NavEnv (tiny demo, LOD Gaussians) and reports the collector's and the w
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from policies import make_policy  # noqa: E402
-from wanderland_nav import keys as K  # noqa: E402
-from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer, make_actor  # noqa: E402
+from policies import make_policy
+from wanderland_nav import keys as K
+from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer, make_actor
 
 DEMO = {  # conf/policy/*.yaml demo sizes
     "cnn": dict(context=2, image_size=(64, 64), feature_dim=128),

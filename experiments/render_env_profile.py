@@ -34,11 +34,11 @@ def env_views(B: int, res: int, lod_px: float | None):
     cfg.camera.enabled = False  # poses only; the renderer is what we time
     if hasattr(cfg, "goal_image"):
         cfg.goal_image = "none"  # goal views are not the step's cost (and need files loaded by the caller)
-    if "episodes" in inspect.signature(make_nav_env).parameters:  # a83eb0b on: episodes and navmesh positional
+    if "episodes" in inspect.signature(make_nav_env).parameters:  # newer layout: episodes and navmesh positional
         from wanderland_nav.episodes import load_episodes
 
         env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, seed=0)
-    else:  # be6d50d
+    else:  # the older layout
         env = make_nav_env(scene, config=cfg, batch_size=B, device="cpu", navmesh=navmesh, gaussians=None, seed=0)
     env.reset()
     viewmats = AgentCamera(cfg.camera, scene.nav_from_scene, None, None, "cpu").cam_from_world(env._pos, env._yaw)

@@ -2,7 +2,7 @@
 
 Here so that `planners` stands alone (it never imports `wanderland_nav`). `wanderland_nav.atomic`
 keeps its own copy: importing this one from there would load the whole `planners` package into
-layers DESIGN.md keeps apart from it (render, policies). One home for both is the lead's call.
+layers ARCHITECTURE.md keeps apart from it (render, policies).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Every reader names the file it could not read (issue 15, item 6); README's "Bad input" table rows.
+"""Every reader names the file it could not read ; README's "Bad input" table rows.
 
 Each test truncates or empties a real artefact written by the project's own writer, then checks the
 error type (`WanderlandInputError` or planners' `NavMeshFileError`, both `ValueError`s) and that the

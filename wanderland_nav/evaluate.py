@@ -64,7 +64,7 @@ def run(cfg: DictConfig):
     return res
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="evaluate")
+@hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

@@ -31,7 +31,7 @@ def run(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="export_usd")
+@hydra.main(version_base="1.3", config_path="conf", config_name="export_usd")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

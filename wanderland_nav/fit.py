@@ -45,7 +45,7 @@ def run_fit(cfg) -> dict:
     return results
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="fit")
+@hydra.main(version_base="1.3", config_path="conf", config_name="fit")
 def main(cfg: DictConfig) -> None:
     run_fit(cfg)
 

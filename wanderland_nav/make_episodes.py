@@ -59,7 +59,7 @@ def run(cfg: DictConfig):
     return summaries
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="make_episodes")
+@hydra.main(version_base="1.3", config_path="conf", config_name="make_episodes")
 def main(cfg: DictConfig) -> None:
     if getattr(run(cfg), "failed", None):
         sys.exit(1)

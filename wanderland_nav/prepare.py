@@ -57,7 +57,7 @@ def run(cfg: DictConfig):
     return rep
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="prepare")
+@hydra.main(version_base="1.3", config_path="conf", config_name="prepare")
 def main(cfg: DictConfig) -> None:
     if getattr(run(cfg), "failed", None):
         sys.exit(1)

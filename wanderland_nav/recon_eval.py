@@ -93,7 +93,7 @@ def _hydra_output_dir() -> Path:
         return Path.cwd()
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="recon_eval")
+@hydra.main(version_base="1.3", config_path="conf", config_name="recon_eval")
 def main(cfg: DictConfig) -> None:
     from wanderland_nav.compose import SCHEMAS, typed_config
 

@@ -44,7 +44,7 @@ def run(cfg: DictConfig) -> dict:
     return {**counts, "out": str(out)}
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="replay")
+@hydra.main(version_base="1.3", config_path="conf", config_name="replay")
 def main(cfg: DictConfig) -> None:
     run(cfg)
 

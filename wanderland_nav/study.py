@@ -59,7 +59,7 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="study")
+@hydra.main(version_base="1.3", config_path="conf", config_name="study")
 def main(cfg: DictConfig) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
                         force=True)

@@ -72,7 +72,7 @@ def run(cfg: DictConfig) -> dict:
     return {r: results[r]["summary"]["overall"] for r in rows}
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="train")
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
                         force=True)

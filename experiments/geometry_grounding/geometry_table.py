@@ -1,13 +1,14 @@
 """Geometry of the degraded environments against the grounded one: the table in README.md.
 
     python experiments/geometry_grounding/geometry_table.py --out /tmp/grounding --preset tiny --seeds 0 1 2
-    python experiments/geometry_grounding/geometry_table.py --out /tmp/grounding_kitti --kitti --seeds 0 1 2
+    python experiments/real_streets/kitti_street.py --scene <dir>/kitti_street
+    python experiments/geometry_grounding/geometry_table.py --out /tmp/grounding_kitti --kitti <dir>/kitti_street --seeds 0 1 2
 
 Builds the demo block (or uses --scene), prepares it, generates its grounded expert episodes, then for
 every degradation preset and seed builds, prepares and measures the degraded copy. Prints one markdown
 row per preset: mean over seeds with [min, max] (deterministic presets run once), plus the grounded
-scene's own row against the ground-truth mesh as the reference. `--kitti`: the six real KITTI scans as a
-LiDAR-only scene (`experiments/real_streets/kitti_street.py`); presets that need a splat are reported
+scene's own row against the ground-truth mesh as the reference. `--kitti <folder>`: the six real KITTI scans as a
+LiDAR-only scene, the folder `experiments/real_streets/kitti_street.py` builds; presets that need a splat are reported
 as not applicable, with the builder's reason.
 """
 
@@ -39,7 +40,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--scene", type=Path, default=None, help="a grounded scene folder (default: the demo block)")
-    ap.add_argument("--kitti", action="store_true", help="the real KITTI street (LiDAR-only) as the grounded scene")
+    ap.add_argument("--kitti", type=Path, default=None,
+                    help="the real KITTI street (LiDAR-only) as the grounded scene: the folder kitti_street.py builds")
     ap.add_argument("--preset", default="tiny", help="demo preset when --scene is not given")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--episodes", type=int, default=60)
@@ -57,14 +59,10 @@ def main() -> None:
 
     src = args.scene
     if args.kitti:
-        import sys
-
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "real_streets"))
-        from kitti_street import make_scene
-
-        src = args.out / "kitti_street"
-        if not (src / "lidar" / "poses.txt").is_file():  # a re-copy would change mtimes and rebuild every copy
-            make_scene(src)
+        if not (args.kitti / "lidar" / "poses.txt").is_file():
+            raise SystemExit(f"{args.kitti}: no lidar/poses.txt; build the street first: "
+                             f"python experiments/real_streets/kitti_street.py --scene {args.kitti}")
+        src = args.kitti
     src = src or make_demo_scene(args.out / f"demo_{args.preset}", seed=0, preset=args.preset)
     grounded = _prepare(src)
     ep_path = args.out / "grounded_episodes.json"

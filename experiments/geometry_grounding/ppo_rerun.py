@@ -1,10 +1,10 @@
 """The study's RL half again with another PPO recipe, from the study's OWN BC checkpoints (BC is not re-run).
 
-    python experiments/geometry_grounding/ppo_rerun.py --ppo-out /tmp/study/r6 -- +study=grounding \
-        out=/tmp/study/r5/out source.path=/tmp/study/r3/demo_tiny threads=1
+    python experiments/geometry_grounding/ppo_rerun.py --ppo-out <ppo out> -- +study=grounding \
+        out=<study out> source.path=<source scene> threads=1
 
 Why a script and not study cells: the study's `train` cell is BC then PPO in one run; when only PPO's
-recipe changes (here the learning issue's `algo.ppo.action_dist=tracked`, now the default), re-running
+recipe changes (here `algo.ppo.action_dist=tracked`, now the default), re-running
 BC would cost ~3x the PPO time and change the BC policies the comparison is paired against. So for each
 seed and each environment the study trained in, this runs `train` (library call, the study's composed
 recipe under the CURRENT code and config) with `init_checkpoint=<the study's train cell>/checkpoints/bc.pt`

@@ -1,7 +1,7 @@
 """Cost of `prepare_scene` on an already prepared scene (the up-to-date path), median of 5 calls.
 
-Issue 15 made the up-to-date check verify that each cached artefact is intact (sha256 of its bytes
-against the sidecar). Run with the old and the new code back to back:
+The up-to-date check verifies that each cached artefact is intact (sha256 of its bytes
+against the sidecar). To compare two code versions, run both back to back:
 
     PYTHONPATH=/tmp/base-<you> python experiments/prepare_verify/bench.py /tmp/demo_tiny
     PYTHONPATH=$PWD            python experiments/prepare_verify/bench.py /tmp/demo_tiny

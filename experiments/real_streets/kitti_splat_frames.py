@@ -1,10 +1,11 @@
 """Agent camera frames rendered from a LiDAR-only street's `lidar_splat` (`wanderland_nav/scene/lidar_splat.py`).
 
-    PYTHONPATH=$PWD python experiments/real_streets/kitti_splat_frames.py --scene /tmp/kitti_street [--build] \
+    python experiments/real_streets/kitti_street.py --scene <dir>/kitti_street      # the scene folder, prepared
+    python experiments/real_streets/kitti_splat_frames.py --scene <dir>/kitti_street [--build] \
         [--more <degraded scene> ...] [--png experiments/real_streets/kitti_splat_frames.png] [--size 128] \
         [--lod-px 1]
 
-`--build` first makes the KITTI v2 folder (`kitti_street.make_scene`) and its splat (`write_lidar_splat`). Then,
+`--build` first writes the street's splat (`write_lidar_splat`). Then,
 per scene (the street and each `--more` one, e.g. the study's degraded copies), one frame at every other sensor
 pose, with the agent's feet `SENSOR_HEIGHT` (times the scene's degradation scale) under the sensor looking along
 the trajectory, and the same poses looking 90 deg left: the default env camera (`conf/env`: pinhole, hfov 90,
@@ -25,8 +26,7 @@ import torch
 
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from kitti_street import SENSOR_HEIGHT, make_scene  # noqa: E402
+SENSOR_HEIGHT = 1.73  # metres from the KITTI Velodyne to the road (the dataset's sensor setup)
 
 
 def render_frames(root: Path, size: int, lod_px: float | None) -> tuple[np.ndarray, list[str]]:
@@ -68,7 +68,6 @@ def main(argv=None) -> None:
     if a.build:
         from wanderland_nav.scene.lidar_splat import write_lidar_splat
 
-        make_scene(a.scene)
         print(write_lidar_splat(a.scene))
     rows = [render_frames(root, a.size, a.lod_px) for root in [a.scene, *a.more]]
     import matplotlib

@@ -1,5 +1,5 @@
 """Where the compiled path's time goes: CPU ms of the composite, the fused kernel's calls and its
-in-situ cost per pixel-entry evaluation, eager vs compiled, at the issue's two operating points.
+in-situ cost per pixel-entry evaluation, eager vs compiled, at the two operating points.
 
   cd experiments; OMP_NUM_THREADS=1 PYTHONPATH=$PWD/.. python render/compiled_stages.py --point target
   cd experiments; OMP_NUM_THREADS=1 PYTHONPATH=$PWD/.. python render/compiled_stages.py --point env

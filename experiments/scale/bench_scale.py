@@ -1,4 +1,4 @@
-"""Scaling figures for issue 19: collector frames/s vs workers, memory per scene, scene preparation time.
+"""Scaling figures: collector frames/s vs workers, memory per scene, scene preparation time.
 
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 1 2 4
     OMP_NUM_THREADS=1 python experiments/scale/bench_scale.py --scenes /tmp/scale_demo_set --workers 2 --ray
@@ -16,22 +16,19 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from policies import make_policy  # noqa: E402
-from wanderland_nav.compose.build import shaped_env_config  # noqa: E402
-from wanderland_nav.compose.scene_sets import scene_env_fn  # noqa: E402
-from wanderland_nav.envs.config import NavEnvConfig, TerminationConfig  # noqa: E402
-from wanderland_nav.envs.multi_scene import measure_bytes  # noqa: E402
-from wanderland_nav.rl.ppo import make_actor, make_collector  # noqa: E402
-from wanderland_nav.rl.scene_sets import multi_scene_env_fn  # noqa: E402
-from wanderland_nav.scene.sets import load_scene_set  # noqa: E402
+from policies import make_policy
+from wanderland_nav.compose.build import shaped_env_config
+from wanderland_nav.compose.scene_sets import scene_env_fn
+from wanderland_nav.envs.config import NavEnvConfig, TerminationConfig
+from wanderland_nav.envs.multi_scene import measure_bytes
+from wanderland_nav.rl.ppo import make_actor, make_collector
+from wanderland_nav.rl.scene_sets import multi_scene_env_fn
+from wanderland_nav.scene.sets import load_scene_set
 
 
 def setup(scene_root: str):

@@ -2,8 +2,8 @@
 differences (each minus BC, and the new recipe minus the old one), over seeds.
 
     PYTHONPATH=$PWD python experiments/train/compare_recipes.py \
-        --old "waypoints (s4)" '/tmp/fresh3/wanderland/outputs/citywalker_rl_long/*_seed*' \
-        --new "tracked (s5)" '/tmp/learning/test5/tracked_s*'
+        --old "waypoints" '<runs>/waypoints_s*' \
+        --new "tracked" '<runs>/tracked_s*'
 
 Each glob names one run folder per seed (`results.json` with the rows `init` and `RL`, as `train` writes them
 with `init_checkpoint=`); folders are matched by seed (the `seed` suffix of the folder name, `_s<N>` or

@@ -1,6 +1,6 @@
 """Which of PPO's action dimensions carry signal? Per waypoint, on real batches from a BC checkpoint.
 
-    PYTHONPATH=$PWD python experiments/train/diagnose_ppo_action.py --checkpoint /tmp/learning/bc/seed0.pt
+    PYTHONPATH=$PWD python experiments/train/diagnose_ppo_action.py --checkpoint <bc checkpoints>/seed0.pt
 
 The env executes ONE waypoint per step (`envs.kinematics.select_waypoint`: the first farther than
 `arrive_distance`). With PPO's Gaussian over all K*2 waypoint coordinates (`action_dist=waypoints`) the

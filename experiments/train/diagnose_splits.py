@@ -1,7 +1,7 @@
-"""Does a policy fail more on the routes it was not trained on, and why does it fail? (issue 16)
+"""Does a policy fail more on the routes it was not trained on, and why does it fail?
 
-    PYTHONPATH=$PWD python experiments/train/diagnose_splits.py --out /tmp/learning/diag7 \\
-        --policy BC /tmp/learning/bc/seed{0,1,2}.pt [--policy BC+RL <last.pt of seeds 0,1,2>] \\
+    PYTHONPATH=$PWD python experiments/train/diagnose_splits.py --out <out> \\
+        --policy BC <bc checkpoints>/seed{0,1,2}.pt [--policy BC+RL <last.pt of seeds 0,1,2>] \\
         [--policy "BC sampled" <the same BC checkpoints>] [--run]
 
 Each checkpoint (the i-th given is seed i) is evaluated deterministically on the train, val and test episodes of

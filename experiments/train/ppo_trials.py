@@ -1,6 +1,6 @@
 """One row per PPO trial: the SR change over its init policy on the same episodes, and why (PPO diagnostics).
 
-    PYTHONPATH=$PWD python experiments/train/ppo_trials.py /tmp/learning/runs --rows init RL
+    PYTHONPATH=$PWD python experiments/train/ppo_trials.py <runs> --rows init RL
 
 Each trial is a set of run folders `<root>/<trial>_s<seed>` (a `train` run with `results.json` and
 `metrics.csv`, e.g. `+exp=citywalker_rl_long init_checkpoint=<bc.pt> eval.split=val`). Per trial:

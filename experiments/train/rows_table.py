@@ -1,8 +1,8 @@
-"""One seed table from rows taken out of several runs' `results.json` (issue 16: generalisation rows).
+"""One seed table from rows taken out of several runs' `results.json` (generalisation rows).
 
     PYTHONPATH=$PWD python experiments/train/rows_table.py \\
-        --row BC '/tmp/learning/s7gen/layout1/bc_s*/results.json:init' \\
-        --row BC+RL '/tmp/learning/s7gen/layout1/bcrl_s*/results.json:init' --out layout1.txt
+        --row BC '<runs>/layout1/bc_s*/results.json:init' \\
+        --row BC+RL '<runs>/layout1/bcrl_s*/results.json:init' --out layout1.txt
 
 `python -m wanderland_nav.rl.report` needs every row in every file; an evaluation-only run
 (`train init_checkpoint=<ckpt> algo.ppo.enabled=false`) writes one row (`init`) per checkpoint, so the BC and

@@ -1,7 +1,7 @@
 """Learning curves over several seeds: SR / SPL / return against PPO frames, mean and band over seeds.
 
     PYTHONPATH=$PWD python experiments/train/seed_curves.py outputs/citywalker_rl/*_seed* \
-        --out experiments/train/results/s4/citywalker_rl_3seeds_curves.png
+        --out citywalker_rl_3seeds_curves.png
 
 Each run folder is one seed of the same recipe (`metrics.csv` as the console logger writes it, and
 `results.json`). Training-rollout curves (grey in a run's own `curves.png`) count only the episodes that

@@ -21,17 +21,14 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from policies import make_policy  # noqa: E402
-from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer  # noqa: E402
+from policies import make_policy
+from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
 
 
 class NullLogger:

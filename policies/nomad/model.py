@@ -9,7 +9,7 @@ tokens -> obs encoding `[N, D]`.
 Heads: a temporal-distance MLP (steps to the goal), and a conditional 1-D conv denoiser that predicts the
 noise on the 8 waypoint deltas normalised to [-1, 1] (DDPM, squared-cosine schedule, 10 steps).
 
-PPO action distribution (our design choice, documented as the issue asks): the mean is the
+PPO action distribution (a design choice of this project): the mean is the
 **deterministic DDIM chain (eta = 0) started from x_T = 0**, unrolled through all diffusion steps with
 gradients, then un-normalised and cumulated into metres; the std is the base class's learned
 state-independent std. This keeps an exact log-prob (a diffusion sample has none in closed form) and lets

@@ -1,4 +1,4 @@
-"""One scene resolution and one navigation group for every entry point (issues 14 and 15)."""
+"""One scene resolution and one navigation group for every entry point."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Run identity (issue 15, item 2): every checkpoint and result row knows the config and scene it came from,
+"""Run identity: every checkpoint and result row knows the config and scene it came from,
 the default run folder carries it, and a run folder of another identity is refused with what differs."""
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def test_sweep_values_get_their_own_default_run_folders(tmp_path):
 
 
 def test_train_refuses_a_run_folder_of_another_identity(demo_episodes, tmp_path):
-    """Old behaviour: raising total_frames in the same run_dir re-printed the old BC+RL row."""
+    """Raising total_frames in the same run_dir must not silently re-print the earlier BC+RL row."""
     from wanderland_nav.rl.checkpoint import load_checkpoint
     from wanderland_nav.train import run
 

@@ -1,7 +1,7 @@
 """`scene.set` through the composition root: train steps every scene (BC on the first), evaluate reports a
 row per scene, preparation hears the composed navigation group, and collector=ray reaches the recipe.
 
-The set is a folder of two links to the session's prepared demo scene (it has episodes, so nothing is
+The set is a folder of two links to the test run's prepared demo scene (it has episodes, so nothing is
 prepared again): seconds, not the minutes three fresh demo seeds take (those run in tests/scale, slow).
 """
 

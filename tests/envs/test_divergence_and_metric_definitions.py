@@ -1,4 +1,4 @@
-"""Issue 15 items 3 and 10 on the fake ramp room (tests/envs/env_fakes.py): NaN actions are counted and
+"""Divergence and metric definitions on the fake ramp room (tests/envs/env_fakes.py): NaN actions are counted and
 move nobody; NE is the paper's Euclidean end-to-goal distance, distance_to_goal the geodesic one; SPL
 compares horizontal lengths on both sides."""
 

@@ -50,7 +50,7 @@ def test_run_on_prepared_scene_writes_table_csv_json(prepared_demo_scene, demo_e
 
 
 def test_rollout_records_the_episodes_file_used_and_no_blank_frames(prepared_demo_scene, demo_episodes, tmp_path):
-    """Item 9 of issue 15: `episodes=<other file>` is what the rollout names (replay found 0 episodes), and
+    """`episodes=<other file>` is what the rollout names (replay found 0 episodes), and
     a camera that is off stores no 8x8 placeholder frames."""
     import shutil
 

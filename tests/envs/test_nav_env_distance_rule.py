@@ -1,4 +1,4 @@
-"""NavEnv never passes another distance off as the geodesic (issue 15 item 1): unreachable episodes
+"""NavEnv never passes another distance off as the geodesic: unreachable episodes
 are refused at load, a step with no geodesic is counted and can never be a success."""
 
 from __future__ import annotations

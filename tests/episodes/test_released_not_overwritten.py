@@ -1,4 +1,4 @@
-"""Issue 15 item 4: the expert never overwrites an episodes file this project did not write."""
+"""The expert never overwrites an episodes file this project did not write."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 15 item 5: fitting images are undistorted (OpenCV radial-tangential and fisheye), never silently
+"""Fitting images are undistorted (OpenCV radial-tangential and fisheye), never silently
 fitted with the ideal model. A synthetic distorted image is made from an analytic pattern on the ideal
 camera, so the undistorted image is known exactly."""
 

@@ -33,7 +33,7 @@ def check_raster_against_exact(nm: NavMesh, n_points: int = 600, n_goals: int = 
     bound = 2 * np.sqrt(2) * nm.cs
     assert (np.abs(e) < 1e-3).mean() >= 0.97  # exact almost everywhere
     # within the bound everywhere (before the tangency margin, 0.07-0.4 % of points beside wall edges were
-    # not: experiments/navmesh/README.md "Found in session 2, fixed in session 3")
+    # not: experiments/navmesh/README.md, the tangency margin)
     assert (e <= bound + 1e-3).all(), np.sort(e)[-10:]
     assert raster.stats["queries"] == n_points
     return e

@@ -113,7 +113,7 @@ def test_level_many_pairs(shared_data, name):
     _check_lipschitz(nm, 3000, seed=8)
 
 
-# ---- the other two levels in the default run, kept to about a second each (issue 15, item 11)
+# ---- the other two levels in the default run, kept to about a second each
 
 
 def test_nav_test_islands_fast(shared_data):

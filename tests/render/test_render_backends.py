@@ -2,7 +2,7 @@
 
 Tolerances: the packed path does the same float operations as the dense reference except the
 order of a few 3x3 products, so float32 images agree to ~1e-6 (1e-5 asserted, as elsewhere). The
-compiled path is held to the issue's >= 50 dB PSNR against eager (it fuses and reorders float32
+compiled path is held to >= 50 dB PSNR against eager (it fuses and reorders float32
 arithmetic; measured ~150 dB). Compile tests are `slow`: the first torch.compile of the two stages
 costs ~40 CPU-seconds, which the default run cannot afford on a shared 2-core machine.
 """

@@ -1,6 +1,6 @@
 """The fast tiled rasterizer against the dense reference, gradcheck, and its invariants.
 
-Tolerances: float64 results agree to ~1e-13 (1e-10 asserted); float32 to the issue's 1e-5: the
+Tolerances: float64 results agree to ~1e-13 (1e-10 asserted); float32 to 1e-5: the
 fast path expands the quadratic form in tile-local coordinates, which costs a few ulps only.
 """
 

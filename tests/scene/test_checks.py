@@ -1,4 +1,4 @@
-"""Up-axis plausibility and the refusal to write an empty navmesh (issue 15 items 7-8)."""
+"""Up-axis plausibility and the refusal to write an empty navmesh."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Real-scan mistakes a new user makes (issue 15 item 8): each must fail with the file, the byte count,
+"""Real-scan mistakes a new user makes: each must fail with the file, the byte count,
 the line or the format named, instead of garbage points or a misleading "wrong up axis?"."""
 
 from __future__ import annotations

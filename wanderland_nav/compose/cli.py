@@ -16,7 +16,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the package's link to the repository's conf/, shipped in the wheel
 
 # `${basename:${scene.path}}` in conf/scene/folder.yaml: a scene folder is named after itself
 OmegaConf.register_new_resolver("basename", lambda p: Path(str(p)).name, replace=True)

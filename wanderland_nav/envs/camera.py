@@ -84,7 +84,7 @@ class AgentCamera:
         """Threads that render groups concurrently: `render_threads`, else the CPU cores this process may
         use. Not torch's intra-op count: each group runs on one intra-op thread with no barrier, so the
         groups use the cores even when `threads=1` keeps the small policy / env ops off the OpenMP pool
-        (which collapses under load: experiments/env/README.md, fourth pass)."""
+        (which collapses under load: experiments/env/README.md)."""
         return self.cfg.render_threads if self.cfg.render_threads is not None else available_cores()
 
     @torch.no_grad()

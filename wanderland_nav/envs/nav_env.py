@@ -66,7 +66,7 @@ def _one_intra_op_thread(method):
     a loaded machine by milliseconds per op (`planners/threads.py`). The camera's render groups run on
     their own threads (`AgentCamera.workers`: one intra-op thread each; a compiled or GPU backend gets the
     caller's intra-op count back, `AgentCamera.caller_threads`). Measured in
-    `experiments/env/README.md` (2026-11-24, fourth pass). Nested entry points (`step_and_maybe_reset`
+    `experiments/env/README.md`. Nested entry points (`step_and_maybe_reset`
     calls `step`) keep the outermost caller's count."""
 
     @functools.wraps(method)

@@ -14,7 +14,7 @@ The binning (sorts, `nonzero`, the tile expansion), the per-chunk gathers and th
 stay eager: data-dependent shapes. The backward is the eager recomputing one (`rasterize.py`), so
 gradients are the eager formulas evaluated at the same inputs.
 
-Measured (experiments/render/README.md, fifth pass): the fused kernel is 2.4-3.4x eager's chunk kernel
+Measured (experiments/render/README.md): the fused kernel is 2.4-3.4x eager's chunk kernel
 per evaluation in isolation, but end to end the compiled path is 1.15x of eager at 64x64/50k and
 1.0-1.1x at the env point: the composite is ~30 % of a call, and each compiled call pays ~0.1 ms of
 guards/dispatch plus gathers. Off by default for that reason.

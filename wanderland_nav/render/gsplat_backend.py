@@ -3,8 +3,8 @@
 Why an adapter and not a second renderer: `api.rasterization` already has gsplat 1.5's signature
 and return layout, so the only work is dropping this package's pure-PyTorch scheduling knobs and
 refusing inputs gsplat cannot take (CPU tensors). Install with `pip install -e ".[gsplat]"` on a
-CUDA machine. UNTESTED here: no GPU was available when it was written (the parity test against
-the pure-PyTorch renderer is in tests/render/test_render_backends.py under the `gpu` marker).
+CUDA machine. Its parity test against the pure-PyTorch renderer is in
+tests/render/test_render_backends.py under the `gpu` marker (it needs CUDA, so the default run skips it).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Why: at the simulator's operating points (B = 64 cameras, 32x32 or 64x64 px) a render is thousands
 of small tensor ops. Torch's OpenMP pool at 2 threads pays a fork/join barrier per op and gave only
-1.24x of 1 thread (lead, idle box: 338.9 vs 274.0 agent-frames/s). Torch ops release the GIL, so K
+1.24x of 1 thread (idle 2-core box: 338.9 vs 274.0 agent-frames/s). Torch ops release the GIL, so K
 Python threads that each run whole renderer calls on one intra-op thread keep K cores busy with no
 barrier inside a call (`experiments/env/README.md` has the figures).
 

@@ -493,7 +493,7 @@ def _write_bytes(path, data: bytes) -> None:
 
 # --------------------------------------------------------------------------- text format (re-exported)
 
-# The `.txt` readers/writers live in `scene.colmap_text` (issue 14: module size). They are re-exported
+# The `.txt` readers/writers live in `scene.colmap_text` (to keep each module small). They are re-exported
 # here lazily (PEP 562) because colmap_text imports this module's data classes: an eager import in
 # either direction would fail when the other module is imported first.
 _TEXT_EXPORTS = frozenset({"read_cameras_txt", "write_cameras_txt", "read_images_txt", "write_images_txt",

@@ -1,6 +1,6 @@
 """COLMAP text-format (`.txt`) readers and writers: `cameras.txt`, `images.txt`, `points3D.txt`.
 
-Split out of `scene.colmap` (issue 14: no module over 600 lines); `scene.colmap` re-exports every
+Split out of `scene.colmap` to keep each module small; `scene.colmap` re-exports every
 name here, so `from wanderland_nav.scene.colmap import read_cameras_txt` and `C.read_images_txt` keep
 working. This module depends on `scene.colmap` for the data classes and `ColmapFormatError`;
 `scene.colmap` imports this one lazily (never at import time), so either can be imported first.
