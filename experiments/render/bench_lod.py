@@ -7,7 +7,7 @@ each resolution prints one line:
         ms_per_view=<cut> full_ms_per_view=<all Gaussians> build_s=<hierarchy build or cache read>
 
     python experiments/render/bench_lod.py --scene <folder | splat.ply> --res 32 64 128 [--views 8]
-        [--target-px 2 1] [--topk 10000] [--no-full]
+        [--target-px 2 1] [--topk 10000] [--no-full] [--supersample 4]
 
 `--topk N` adds a `topk` line for the old camera (the N Gaussians of largest opacity x footprint) at the
 same views, for comparison. `--no-full` skips the reference (PSNR then unknown): for scenes whose full
@@ -100,6 +100,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-full", action="store_true")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--supersample", type=int, default=0,
+                    help="also score the cut and the full render against every Gaussian rendered at this many times "
+                         "the resolution, box-filtered down (the anti-aliased image); 0: off")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     splat, viewmats, Ks1, aspect = capture_views(a.scene, a.views)
@@ -135,6 +138,15 @@ def main() -> None:
             print(f"lod res={res} target_px={target} psnr_db={p} ssim={s} gaussians_per_view={n_cut:.0f} "
                   f"ms_per_view={1e3 * cut_s / V:.1f} full_ms_per_view={'nan' if full_s is None else f'{1e3 * full_s / V:.1f}'} "
                   f"build_s={build_s:.1f}", flush=True)
+        if a.supersample > 1 and full is not None:
+            Kss = torch.as_tensor(Ks1, dtype=torch.float32).clone()
+            Kss[:, :2] *= res * a.supersample
+            big = torch.cat([render(h.leaves, vm[i:i + 1], Kss[i:i + 1], W * a.supersample, H * a.supersample,
+                                    render_mode="RGB").rgb for i in range(V)])
+            ref = torch.nn.functional.avg_pool2d(big.permute(0, 3, 1, 2), a.supersample).permute(0, 2, 3, 1)
+            cut = per_view(h.with_target(a.target_px[0]))
+            print(f"supersampled res={res} x{a.supersample} target_px={a.target_px[0]} psnr_cut_db={psnr(cut, ref).mean():.2f} "
+                  f"psnr_full_db={psnr(full, ref).mean():.2f}", flush=True)
         if topk is not None:
             img, tk_s = timed(lambda: per_view(topk), a.repeat)
             p, s = fmt(img)

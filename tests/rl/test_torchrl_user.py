@@ -10,6 +10,7 @@ PPO snippet are the strings below, executed.
 from __future__ import annotations
 
 import textwrap
+from pathlib import Path
 
 import pytest
 import torch
@@ -77,6 +78,11 @@ def _snippet(code: str, demo: dict):
         del wanderland_nav.__dict__["make_env"]
     assert wanderland_nav.make_env is real
     return scope
+
+
+def test_readme_shows_these_snippets():
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    assert QUICK_START.lstrip("\n") in readme and PPO_SNIPPET.lstrip("\n") in readme
 
 
 def test_readme_quick_start_runs(demo, capsys):
