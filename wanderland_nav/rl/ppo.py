@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Callable
 
@@ -245,6 +246,19 @@ class PPOTrainer:
         """Critic values -> GAE -> actor epochs (ClipPPOLoss, target-KL stop) -> critic epochs. During the first
         `critic_warmup_iters` iterations the actor is left alone: a fresh critic gives near-random advantages,
         and policy-gradient steps on them would move a behaviour-cloned policy away from its demonstrations."""
+        with self._shared_frame_features(batch):
+            return self._update(batch)
+
+    def _shared_frame_features(self, batch: TensorDictBase):
+        """The batch's camera images encoded once for the whole update (`NavPolicy.reuse_frame_features`): each
+        frame of `[B, T]` carries `context` images and the next frame shares all but one of them, and a frozen
+        encoder (`freeze_encoder=rl`) gives the same features in every critic pass, epoch and minibatch. A
+        trained encoder still runs per minibatch (on its distinct images), so the gradients are unchanged."""
+        if K.RGB not in self.policy.in_keys:
+            return nullcontext()
+        return self.policy.reuse_frame_features(batch.get(K.RGB), batch.get(("next", K.RGB)))
+
+    def _update(self, batch: TensorDictBase) -> dict[str, float]:
         cfg = self.cfg
         warmup = self.iteration < cfg.critic_warmup_iters
         batch = batch.exclude(K.STATE_VALUE)  # the policy's own value head wrote one: PPO's critic replaces it
