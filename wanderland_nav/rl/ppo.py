@@ -14,6 +14,12 @@ older `WaypointNormal` over all `[K, 2]` coordinates (`policies.base`). The crit
 detached readout features + final-goal features + the episode clock, PopArt-normalised targets), fitted
 for `critic_epochs` passes per batch on inputs computed once; the policy's `value_head` is not used here.
 The actor's learning rate anneals linearly to 0 over `total_frames` (`anneal_lr`, as CleanRL's PPO).
+
+No repeated encoder work: a frame of experience carries `context` camera images and the next frame shares all
+but one, so one update encodes each distinct image once (`NavPolicy.reuse_frame_features`; a frozen encoder's
+features serve every critic pass, epoch and minibatch, a trained one runs per minibatch on its distinct
+images). `overlap=True` collects the next batch in a thread while the update runs (`rl/overlap.py`): one
+iteration stale, which the decoupled objective corrects (`_decoupled`).
 """
 
 from __future__ import annotations
