@@ -98,11 +98,14 @@ def test_overlapped_training_is_deterministic_and_logs_the_correction():
     assert all(torch.isfinite(torch.tensor(v)) for r in rows for k, v in r.items() if k.startswith("losses/"))
 
 
-def test_overlap_refuses_worker_processes():
+def test_overlap_applies_to_one_local_collector_and_says_so_otherwise(caplog):
     t = trainer(True)
+    assert t.overlaps()
     t.num_workers = 2
-    with pytest.raises(ValueError, match="overlap"):
-        t.train()
+    with caplog.at_level("WARNING"):
+        assert not t.overlaps()
+    assert "collected synchronously" in caplog.text and "2 collector workers" in caplog.text
+    assert not trainer(False).overlaps()
 
 
 def test_behaviour_actor_samples_under_a_deterministic_interaction_mode():

@@ -378,6 +378,19 @@ class PPOTrainer:
                 f"critic_lr or max_grad_norm, or look for NaN rewards or observations")
 
     # -------------------------------------------------------------- the loop
+    def overlaps(self) -> bool:
+        """Whether this run collects during the update (`overlap`): with one local collector. Worker processes
+        or Ray actors (`collector=multi|ray`) already collect beside the learner's process and keep their
+        synchronous batches; that is said in the log."""
+        if not self.cfg.overlap:
+            return False
+        if self.num_workers > 1 or self.ray is not None:
+            log.warning("PPO: algo.ppo.overlap=true applies to collector=single; with %s the batches are collected "
+                        "synchronously (on-policy) by the worker processes", "Ray" if self.ray else
+                        f"{self.num_workers} collector workers")
+            return False
+        return True
+
     def train(self) -> dict[str, float]:
         cfg = self.cfg
         remaining = cfg.total_frames - self.frames
@@ -385,10 +398,7 @@ class PPOTrainer:
             log.info("PPO already complete (%d/%d frames)", self.frames, cfg.total_frames)
             return {}
         seed = self.seed + 1000 * self.iteration
-        if cfg.overlap:
-            if self.num_workers > 1 or self.ray is not None:
-                raise ValueError("PPO: algo.ppo.overlap=true collects in a thread of this process; it takes "
-                                 "collector=single (num_workers=1), not worker processes or Ray")
+        if self.overlaps():
             collector = OverlappedCollector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
                                             total_frames=remaining, seed=seed)
             threads = torch.get_num_threads()
@@ -428,6 +438,6 @@ class PPOTrainer:
         finally:
             pbar.close()
             collector.shutdown()
-            if cfg.overlap:
+            if isinstance(collector, OverlappedCollector):
                 torch.set_num_threads(threads)
         return last
