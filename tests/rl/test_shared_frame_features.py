@@ -89,7 +89,7 @@ def test_update_equals_the_update_that_encodes_every_frame(freeze):
         torch.manual_seed(7)  # the minibatch permutations
         results.append(t.update(batch.clone()))
         step = max(float((p.detach() - before[n]).abs().max()) for n, p in t.policy.named_parameters())
-        assert step > 1e-3  # the comparison below is not between two unmoved policies
+        assert step > 1e-4  # the comparison below (atol 1e-5) is not between two unmoved policies
         params.append({n: p.detach().clone() for n, p in t.policy.named_parameters()})
         params[-1].update({f"critic.{n}": p.detach().clone() for n, p in t.critic.named_parameters()})
     old, new = results

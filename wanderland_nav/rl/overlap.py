@@ -55,7 +55,8 @@ class BehaviourActor(TensorDictModuleBase):
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         dist = self.actor.get_dist(td)
         normal = dist.base_dist
-        x = normal.loc + normal.scale * torch.randn(normal.loc.shape, generator=self.generator, dtype=normal.loc.dtype)
+        noise = torch.randn(normal.loc.shape, generator=self.generator, dtype=normal.loc.dtype)  # CPU stream, any device
+        x = normal.loc + normal.scale * noise.to(normal.loc.device)
         action = dist._copies(x) if hasattr(dist, "_copies") else x
         td.set(K.ACTION, action)
         td.set(K.ACTION_LOG_PROB, dist.log_prob(action))
