@@ -56,8 +56,10 @@ def run(cfg: DictConfig) -> dict:
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
     shown = rows + [r + tag for tag in (SAMPLED, BLANK_CAMERA) for r in rows if r + tag in results]  # eval.*_rows
-    table = comparison_table({r: results[r]["records"] for r in shown}, baseline=rows[0] if shown == rows else None,
-                             pairs=successive_pairs(shown))  # the RL gain "BC+RL - BC" beside "- untrained"
+    pairs = successive_pairs(shown)  # the RL gain "BC+RL - BC"; with sampled rows no common baseline
+    if not any(r.endswith(SAMPLED) for r in shown):  # each trained row against the first ("- untrained")
+        pairs = list(dict.fromkeys([(r, rows[0]) for r in rows[1:]] + pairs))
+    table = comparison_table({r: results[r]["records"] for r in shown}, pairs=pairs)
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
     where = f"set {c.scene.name}" if c.scene.set else scene.name
     header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
