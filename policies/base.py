@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import logging
 import math
+from contextlib import contextmanager
 from typing import Iterable
 
 import torch
@@ -43,6 +44,7 @@ from torch import distributions as D
 from torch import nn
 
 from policies.config import PolicyConfig
+from policies.frame_memo import FrameMemo, distinct
 from wanderland_nav import keys as K
 
 log = logging.getLogger(__name__)
@@ -152,23 +154,58 @@ class NavPolicy(TensorDictModuleBase):
         return []
 
     # ------------------------------------------------------------------ preprocessing
-    def images(self, rgb: torch.Tensor) -> torch.Tensor:
-        """uint8 `[N, T, H, W, 3]` -> normalised float `[N, C, 3, h, w]` at this policy's context/size.
-
-        The env may render more or fewer frames, or another resolution, than the released model used:
-        we keep the newest `context` frames (repeating the oldest when fewer arrive) and resize, so the
-        model always sees its own input convention.
-        """
+    def context_frames(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 `[N, T, H, W, 3]` -> uint8 `[N, C, H, W, 3]`: the newest `context` frames, the oldest repeated
+        when fewer arrive (the env may render more or fewer frames than the released model used)."""
         if rgb.dim() != 5 or rgb.shape[-1] != 3:
             raise ValueError(f"{type(self).__name__}: '{K.RGB}' must be [*B, T, H, W, 3], got {tuple(rgb.shape)}")
         n, t = rgb.shape[:2]
         if t >= self.context:
-            rgb = rgb[:, t - self.context:]
-        else:
-            rgb = torch.cat([rgb[:, :1].expand(n, self.context - t, *rgb.shape[2:]), rgb], dim=1)
+            return rgb[:, t - self.context:]
+        return torch.cat([rgb[:, :1].expand(n, self.context - t, *rgb.shape[2:]), rgb], dim=1)
+
+    def images(self, rgb: torch.Tensor) -> torch.Tensor:
+        """uint8 `[N, T, H, W, 3]` -> normalised float `[N, C, 3, h, w]` at this policy's context/size.
+
+        We keep the newest `context` frames (`context_frames`) and resize, so the model always sees its own
+        input convention.
+        """
+        rgb = self.context_frames(rgb)
+        n = rgb.shape[0]
         return self.image_tensor(rgb.reshape(n * self.context, *rgb.shape[2:])).view(
             n, self.context, 3, *self.image_size
         )
+
+    def frame_features(self, rgb: torch.Tensor, encoder: nn.Module) -> torch.Tensor:
+        """uint8 `[N, T, H, W, 3]` -> `[N, C, D]`: `encoder` over the normalised context frames, each distinct
+        image encoded once (`policies.frame_memo`): within this call always; across calls from the memo that
+        `reuse_frame_features` holds, when `encoder` takes no gradient here. Same values as encoding every
+        frame (to float rounding: the encoder sees another batch), same gradients."""
+        frames = self.context_frames(rgb)                          # [N, C, H, W, 3]
+        n, c = frames.shape[:2]
+        flat = frames.reshape(n * c, *frames.shape[2:])            # [N*C, H, W, 3]
+        encode = lambda imgs: encoder(self.image_tensor(imgs))     # noqa: E731  [M, H, W, 3] -> [M, D]
+        memo = self.__dict__.get("_frame_memo")
+        takes_grad = torch.is_grad_enabled() and any(p.requires_grad for p in encoder.parameters())
+        if memo is not None and not takes_grad:
+            feats = memo.features(encoder, flat, encode)
+        else:
+            rep, inverse = distinct(flat.reshape(n * c, -1))
+            feats = encode(flat[rep])[inverse]
+        return feats.view(n, c, -1)
+
+    @contextmanager
+    def reuse_frame_features(self, *rgb: torch.Tensor):
+        """Within the block, frame features of the images in `rgb` (uint8 `[..., T, H, W, 3]` each, e.g. a PPO
+        batch's `RGB` and its `next` `RGB`) are computed once per encoder and looked up by content
+        (`frame_features`). For encoders that take no gradient (PPO with `freeze_encoder=rl`); a trained
+        encoder still runs per call, on each call's distinct images."""
+        frames = torch.cat([r.reshape(-1, *r.shape[-3:]) for r in rgb])
+        self.__dict__["_frame_memo"] = FrameMemo(frames)
+        try:
+            yield
+        finally:
+            self.__dict__.pop("_frame_memo", None)
 
     def image_tensor(self, img: torch.Tensor) -> torch.Tensor:
         """uint8 `[M, H, W, 3]` -> normalised float `[M, 3, h, w]`."""

@@ -155,10 +155,13 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     else:
         assert ck["phase"] == "bc_done"
     table = (tmp_path / "run" / "table.txt").read_text()
-    # the rows, one paired row per phase (BC - untrained; with RL also BC+RL - BC), title, header, legend; the
-    # sampled twins are off by default (eval.sampled_rows; tests/rl/test_sampled_rows.py)
-    assert table.count("\n") == 3 + 2 * len(rows) + rl
+    # the rows, one paired row per phase (BC - untrained; with RL also BC+RL - BC), title, header, legend; each
+    # trained row again with a blank camera and its pair (eval.blank_camera_rows); the sampled twins are off by
+    # default (eval.sampled_rows; tests/rl/test_sampled_rows.py)
+    assert table.count("\n") == 3 + 2 * len(rows) + rl + 2 * (len(rows) - 1)
     assert re.search(r"^BC - untrained +paired", table, re.M) and "[95% interval] over 2 episodes" in table
+    assert re.search(r"^BC blank camera - BC +paired", table, re.M)
+    assert bool(re.search(r"^BC\+RL blank camera - BC\+RL +paired", table, re.M)) == rl
     assert bool(re.search(r"^BC\+RL - BC +paired", table, re.M)) == rl
     assert " sampled" not in table
     assert (tmp_path / "run" / "curves.png").read_bytes()[:4] == b"\x89PNG"

@@ -23,7 +23,7 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import SAMPLED, comparison_table, row_estimates, successive_pairs
+from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 
@@ -55,9 +55,11 @@ def run(cfg: DictConfig) -> dict:
     recipe, scene = training_recipe(c, config, evaluate)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
-    shown = rows + [r + SAMPLED for r in rows if r + SAMPLED in results]  # eval.sampled_rows
-    table = comparison_table({r: results[r]["records"] for r in shown}, baseline=rows[0] if shown == rows else None,
-                             pairs=successive_pairs(shown))  # the RL gain "BC+RL - BC" beside "- untrained"
+    shown = rows + [r + tag for tag in (SAMPLED, BLANK_CAMERA) for r in rows if r + tag in results]  # eval.*_rows
+    pairs = successive_pairs(shown)  # the RL gain "BC+RL - BC"; with sampled rows no common baseline
+    if not any(r.endswith(SAMPLED) for r in shown):  # each trained row against the first ("- untrained")
+        pairs = list(dict.fromkeys([(r, rows[0]) for r in rows[1:]] + pairs))
+    table = comparison_table({r: results[r]["records"] for r in shown}, pairs=pairs)
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
     where = f"set {c.scene.name}" if c.scene.set else scene.name
     header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "

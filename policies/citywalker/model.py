@@ -51,9 +51,8 @@ class CityWalkerPolicy(NavPolicy):
                                               self.config.max_range / float(self.waypoint_spacing)))
 
     def _tokens(self, obs) -> torch.Tensor:
-        img = self.images(obs[K.RGB])                                    # [N, C, 3, h, w]
-        n, c = img.shape[:2]
-        f_img = self.encoder(img.flatten(0, 1)).view(n, c, -1)           # [N, C, D]
+        f_img = self.frame_features(obs[K.RGB], self.encoder)            # [N, C, D]
+        n, c = f_img.shape[:2]
         past = obs[K.PAST_POSITIONS]                                     # [N, T, 2] body frame
         t = past.shape[1]
         past = past[:, t - c:] if t >= c else torch.cat([past[:, :1].expand(n, c - t, 2), past], dim=1)

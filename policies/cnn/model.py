@@ -32,9 +32,7 @@ class CNNPolicy(NavPolicy):
         return [self.encoder]
 
     def encode(self, obs):
-        img = self.images(obs[K.RGB])                                  # [N, C, 3, h, w]
-        n = img.shape[0]
-        f_img = self.encoder(img.flatten(0, 1)).view(n, -1)            # [N, C*D]
+        f_img = self.frame_features(obs[K.RGB], self.encoder).flatten(1)  # [N, C*D]
         f_goal = self.goal_mlp(polar_fourier(obs[K.GOAL_VECTOR], self.config.num_freqs, self.config.max_range))
         return self.trunk(torch.cat([f_img, f_goal], dim=-1))          # [N, D]
 

@@ -39,9 +39,7 @@ class MBRAPolicy(NavPolicy):
         return [self.encoder]
 
     def encode(self, obs):
-        img = self.images(obs[K.RGB])
-        n, c = img.shape[:2]
-        f_img = self.encoder(img.flatten(0, 1)).view(n, c, -1)          # [N, C, D]
+        f_img = self.frame_features(obs[K.RGB], self.encoder)           # [N, C, D]
         g = obs[K.GOAL_POSE]                                            # [N, 4] x, y, cos, sin (body)
         r = self.config.goal_range
         g_in = torch.cat([g[:, :2] / r, g[:, 2:], torch.log1p(g[:, :2].norm(dim=-1, keepdim=True))], dim=-1)

@@ -122,18 +122,18 @@ class NoMaDPolicy(NavPolicy):
 
     # ---------------------------------------------------------------- trunk
     def encode(self, obs):
-        img = self.images(obs[K.RGB])                                    # [N, C, 3, h, w]
-        n, c = img.shape[:2]
-        f_obs = self.obs_encoder(img.flatten(0, 1)).view(n, c, -1)       # [N, C, D]
+        f_obs = self.frame_features(obs[K.RGB], self.obs_encoder)        # [N, C, D]
+        n, c = f_obs.shape[:2]
+        newest = self.image_tensor(obs[K.RGB][:, -1])                    # [N, 3, h, w]
         goal = self.image_tensor(obs[K.GOAL_IMAGE])                      # [N, 3, h, w]
-        f_goal = self.goal_encoder(torch.cat([img[:, -1], goal], dim=1)).unsqueeze(1)
+        f_goal = self.goal_encoder(torch.cat([newest, goal], dim=1)).unsqueeze(1)
         tokens = [f_obs, f_goal]
         goal_mask = ~obs[K.HAS_GOAL_IMAGE].view(n).bool()                # True -> exploration
-        pad = torch.zeros(n, c + 1, dtype=torch.bool, device=img.device)
+        pad = torch.zeros(n, c + 1, dtype=torch.bool, device=f_obs.device)
         pad[:, c] = goal_mask
         if self.config.use_goal_vector:
             tokens.append(self.goal_vec_embed(polar_fourier(obs[K.GOAL_VECTOR], 4, 50.0)).unsqueeze(1))
-            pad = torch.cat([pad, torch.zeros(n, 1, dtype=torch.bool, device=img.device)], dim=1)
+            pad = torch.cat([pad, torch.zeros(n, 1, dtype=torch.bool, device=f_obs.device)], dim=1)
         tok = self.transformer(torch.cat(tokens, dim=1) + self.pos_embed, src_key_padding_mask=pad)
         keep = (~pad).float().unsqueeze(-1)
         return (tok * keep).sum(1) / keep.sum(1)                         # [N, D] masked average

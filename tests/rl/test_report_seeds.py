@@ -82,3 +82,11 @@ def test_sampled_rows_pair_within_their_mode_and_against_bc():
                                       ("BC+RL sampled", "BC sampled"), ("BC+RL sampled", "BC")]
     assert successive_pairs(["init", "RL", "init sampled", "RL sampled"]) == [
         ("RL", "init"), ("RL sampled", "init sampled"), ("RL sampled", "init")]
+
+
+def test_blank_camera_rows_pair_with_their_own_row_only():
+    from wanderland_nav.rl.report import successive_pairs
+
+    rows = ["untrained", "BC", "BC+RL", "BC blank camera", "BC+RL blank camera", "RL blank camera"]
+    assert successive_pairs(rows) == [("BC", "untrained"), ("BC+RL", "BC"), ("BC blank camera", "BC"),
+                                      ("BC+RL blank camera", "BC+RL")]  # a blank row without its own row: none

@@ -197,6 +197,7 @@ class EvalSettings:
     batch_size: int = at_least(1, 10)
     deterministic: bool = True
     sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
+    blank_camera_rows: bool = False  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
 
 
 @dataclass

@@ -137,5 +137,6 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
                                                                          **kw),
                     logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
                     num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows)
+                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows,
+                    blank_camera_rows=c.eval.blank_camera_rows)
     return recipe, scene

@@ -101,14 +101,15 @@ def explained_variance(pred: torch.Tensor, target: torch.Tensor) -> float:
 
 
 def fit_critic(critic: NavCritic, optim: torch.optim.Optimizer, x: torch.Tensor, target: torch.Tensor, *,
-               epochs: int, minibatch_size: int, max_grad_norm: float) -> float:
+               epochs: int, minibatch_size: int, max_grad_norm: float,
+               generator: torch.Generator | None = None) -> float:
     """`epochs` passes of MSE on normalised targets over cached inputs `x` `[N, F]`, targets `[N, 1]`
     (statistics updated first). Returns the last epoch's mean loss (normalised units)."""
     critic.update_stats(target)
     goal = critic.normalize(target)
     n, loss_sum, steps = x.shape[0], 0.0, 0
     for epoch in range(epochs):
-        perm = torch.randperm(n)
+        perm = torch.randperm(n, generator=generator)
         loss_sum, steps = 0.0, 0
         for start in range(0, n, minibatch_size):
             idx = perm[start:start + minibatch_size]

@@ -14,12 +14,19 @@ older `WaypointNormal` over all `[K, 2]` coordinates (`policies.base`). The crit
 detached readout features + final-goal features + the episode clock, PopArt-normalised targets), fitted
 for `critic_epochs` passes per batch on inputs computed once; the policy's `value_head` is not used here.
 The actor's learning rate anneals linearly to 0 over `total_frames` (`anneal_lr`, as CleanRL's PPO).
+
+No repeated encoder work: a frame of experience carries `context` camera images and the next frame shares all
+but one, so one update encodes each distinct image once (`NavPolicy.reuse_frame_features`; a frozen encoder's
+features serve every critic pass, epoch and minibatch, a trained one runs per minibatch on its distinct
+images). `overlap=True` collects the next batch in a thread while the update runs (`rl/overlap.py`): one
+iteration stale, which the decoupled objective corrects (`_decoupled`).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Callable
 
@@ -39,9 +46,13 @@ from wanderland_nav.errors import NonFiniteLossError
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.critic import NavCritic, explained_variance, fit_critic
 from wanderland_nav.rl.loggers import Logger
+from wanderland_nav.rl.overlap import BEHAVIOUR_VERSION, OverlappedCollector
 from wanderland_nav.rl.tracked_target import TARGET_LOC, TARGET_SCALE, TrackedTargetActor, TrackedTargetNormal
 
 log = logging.getLogger(__name__)
+
+IS_WEIGHT = "importance_weight"
+"""float32 `[N, 1]` in a stale batch: pi_prox / pi_behaviour of each sample's action (`PPOTrainer._decoupled`)."""
 
 
 @dataclass
@@ -69,6 +80,8 @@ class PPOConfig:
     std_lr: float | None = None        # the exploration std's own Adam lr; None: the actor's `lr`
     action_dist: str = "tracked"       # "tracked": Normal over the executed (tracked) waypoint, 2 dims
                                        #   (rl/tracked_target.py); "waypoints": Normal over all K*2 coordinates
+    overlap: bool = False              # collect the next batch while updating (rl/overlap.py): one iteration
+                                       #   stale, corrected by the decoupled objective; one process, 2 threads
 
     @property
     def num_iterations(self) -> int:
@@ -143,8 +156,9 @@ def make_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: in
 
 def env_episode_metrics(collector) -> dict[str, float]:
     """NE / SR / SPL / IR of the episodes the collector's env finished (single-process collector and an env
-    with `pop_finished_metrics`, i.e. NavEnv). Popping also keeps the env's record list from growing."""
-    env = getattr(collector, "env", None)
+    with `pop_finished_metrics`, i.e. NavEnv, or the overlapped collector, which pops them in its own thread).
+    Popping also keeps the env's record list from growing."""
+    env = collector if hasattr(collector, "pop_finished_metrics") else getattr(collector, "env", None)
     if env is None or not hasattr(env, "pop_finished_metrics"):
         return {}
     finished = env.pop_finished_metrics()
@@ -199,8 +213,15 @@ class PPOTrainer:
         self.loss = ClipPPOLoss(self.actor, None, clip_epsilon=cfg.clip_epsilon,  # actor only: see rl/critic.py
                                 entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
                                 critic_coeff=None, normalize_advantage=cfg.normalize_advantage)
-        self.loss.set_keys(action=K.ACTION, sample_log_prob=K.ACTION_LOG_PROB, value=K.STATE_VALUE,
-                           reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
+        # a stale batch (overlap): the same objective on standardised, importance-weighted advantages
+        self.decoupled_loss = ClipPPOLoss(self.actor, None, clip_epsilon=cfg.clip_epsilon,
+                                          entropy_bonus=cfg.entropy_coeff > 0, entropy_coeff=cfg.entropy_coeff,
+                                          critic_coeff=None, normalize_advantage=False)
+        for loss in (self.loss, self.decoupled_loss):
+            loss.set_keys(action=K.ACTION, sample_log_prob=K.ACTION_LOG_PROB, value=K.STATE_VALUE,
+                          reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
+        # the learner's own random stream (minibatch permutations): the global one is the collector's
+        self.generator = torch.Generator().manual_seed(seed)
         self.gae = GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=None, average_gae=False)  # values given
         self.gae.set_keys(value=K.STATE_VALUE, reward=K.REWARD, done=K.DONE, terminated=K.TERMINATED)
         # init_std was applied by make_actor; a resumed run's checkpoint (restore) overwrites it again
@@ -219,7 +240,8 @@ class PPOTrainer:
     def save(self, phase: str = "ppo") -> None:
         if self.checkpointer is not None:
             critic = {"critic": self.critic.state_dict(), "critic_optimizer": self.critic_optim.state_dict(),
-                      "action_std_param": self.std_owner.std_param.detach().clone()}
+                      "action_std_param": self.std_owner.std_param.detach().clone(),
+                      "learner_rng": self.generator.get_state()}
             self.checkpointer.save(self.iteration, policy=self.policy, optimizer=self.optim,
                                    counters=self.state_counters(), config=self.config_dict, phase=phase,
                                    extra=critic)
@@ -232,6 +254,8 @@ class PPOTrainer:
             if "critic" in extra:
                 self.critic.load_state_dict(extra["critic"])
                 self.critic_optim.load_state_dict(extra["critic_optimizer"])
+            if "learner_rng" in extra:
+                self.generator.set_state(extra["learner_rng"])
             if "action_std_param" in extra:  # same identity -> same action_dist -> same shape
                 with torch.no_grad():
                     self.std_owner.std_param.copy_(extra["action_std_param"])
@@ -241,10 +265,25 @@ class PPOTrainer:
             set_rng_state(ckpt["rng"])
 
     # -------------------------------------------------------------- one update
-    def update(self, batch: TensorDictBase) -> dict[str, float]:
+    def update(self, batch: TensorDictBase, stale: bool = False) -> dict[str, float]:
         """Critic values -> GAE -> actor epochs (ClipPPOLoss, target-KL stop) -> critic epochs. During the first
         `critic_warmup_iters` iterations the actor is left alone: a fresh critic gives near-random advantages,
-        and policy-gradient steps on them would move a behaviour-cloned policy away from its demonstrations."""
+        and policy-gradient steps on them would move a behaviour-cloned policy away from its demonstrations.
+        `stale`: the batch was collected by older weights than the actor's (`rl/overlap.py`): the decoupled
+        objective (`_decoupled`) is used."""
+        with self._shared_frame_features(batch):
+            return self._update(batch, stale)
+
+    def _shared_frame_features(self, batch: TensorDictBase):
+        """The batch's camera images encoded once for the whole update (`NavPolicy.reuse_frame_features`): each
+        frame of `[B, T]` carries `context` images and the next frame shares all but one of them, and a frozen
+        encoder (`freeze_encoder=rl`) gives the same features in every critic pass, epoch and minibatch. A
+        trained encoder still runs per minibatch (on its distinct images), so the gradients are unchanged."""
+        if K.RGB not in self.policy.in_keys:
+            return nullcontext()
+        return self.policy.reuse_frame_features(batch.get(K.RGB), batch.get(("next", K.RGB)))
+
+    def _update(self, batch: TensorDictBase, stale: bool) -> dict[str, float]:
         cfg = self.cfg
         warmup = self.iteration < cfg.critic_warmup_iters
         batch = batch.exclude(K.STATE_VALUE)  # the policy's own value head wrote one: PPO's critic replaces it
@@ -264,23 +303,48 @@ class PPOTrainer:
                 group["lr"] = lr * max(0.0, 1.0 - self.frames / cfg.total_frames)
         res["losses/lr"] = self.optim.param_groups[0]["lr"]
         if not warmup:
-            res.update(self._actor_epochs(flat))
+            if stale:
+                res.update(self._decoupled(flat))
+            res.update(self._actor_epochs(flat, stale))
         xf = x.reshape(-1, x.shape[-1])
         res["losses/critic"] = fit_critic(self.critic, self.critic_optim, xf, target, epochs=cfg.critic_epochs,
-                                          minibatch_size=cfg.minibatch_size, max_grad_norm=cfg.max_grad_norm)
+                                          minibatch_size=cfg.minibatch_size, max_grad_norm=cfg.max_grad_norm,
+                                          generator=self.generator)
         with torch.no_grad():
             res["losses/explained_variance_after_fit"] = explained_variance(self.critic(xf), target)
         res["losses/std_mean"] = float(self.std_owner.scale().detach().mean())
         return res
 
-    def _actor_epochs(self, flat: TensorDictBase) -> dict[str, float]:
-        """Minibatch epochs of the clipped objective (+ entropy); stop the batch beyond `target_kl`."""
+    @torch.no_grad()
+    def _decoupled(self, flat: TensorDictBase) -> dict[str, float]:
+        """A stale batch -> decoupled PPO's inputs (Hilton et al. 2021): the proximal policy is the actor now
+        (the update's start), whose log-prob replaces the behaviour's as the clip's reference, and each sample's
+        importance weight pi_prox / pi_behaviour (`IS_WEIGHT`) multiplies its standardised advantage. With
+        w > 0, w * min(r A, clip(r) A) is exactly the decoupled surrogate."""
+        behaviour = flat.get(K.ACTION_LOG_PROB)
+        prox = self.actor.get_dist(flat.select(*self.actor.in_keys).clone()).log_prob(flat.get(K.ACTION))
+        weight = (prox - behaviour).exp()
+        flat.set(K.ACTION_LOG_PROB, prox.reshape(behaviour.shape))
+        flat.set(IS_WEIGHT, weight.reshape(-1, 1))
+        return {"losses/is_weight_mean": float(weight.mean()), "losses/is_weight_max": float(weight.max()),
+                "losses/behaviour_kl": float((behaviour - prox).mean())}
+
+    def _actor_epochs(self, flat: TensorDictBase, stale: bool = False) -> dict[str, float]:
+        """Minibatch epochs of the clipped objective (+ entropy); stop the batch beyond `target_kl`. `stale`:
+        `flat` holds `_decoupled`'s inputs, and the advantage is standardised per minibatch as the on-policy
+        loss does, then weighted."""
         cfg = self.cfg
         n, sums, count, epoch = flat.shape[0], {}, 0, 0
         for epoch in range(cfg.epochs):
-            perm = torch.randperm(n)
+            perm = torch.randperm(n, generator=self.generator)
             for start in range(0, n - cfg.minibatch_size + 1, cfg.minibatch_size):
-                out = self.loss(flat[perm[start:start + cfg.minibatch_size]])
+                mb = flat[perm[start:start + cfg.minibatch_size]]
+                if stale:
+                    adv = mb.get("advantage")
+                    if cfg.normalize_advantage:
+                        adv = (adv - adv.mean()) / adv.std().clamp_min(torch.finfo(adv.dtype).resolution)
+                    mb.set("advantage", adv * mb.get(IS_WEIGHT))
+                out = (self.decoupled_loss if stale else self.loss)(mb)
                 terms = [t for t in ("loss_objective", "loss_entropy") if t in out.keys()]
                 self._check_finite(out, terms, epoch, start // cfg.minibatch_size)
                 self.optim.zero_grad(set_to_none=True)
@@ -314,15 +378,34 @@ class PPOTrainer:
                 f"critic_lr or max_grad_norm, or look for NaN rewards or observations")
 
     # -------------------------------------------------------------- the loop
+    def overlaps(self) -> bool:
+        """Whether this run collects during the update (`overlap`): with one local collector. Worker processes
+        or Ray actors (`collector=multi|ray`) already collect beside the learner's process and keep their
+        synchronous batches; that is said in the log."""
+        if not self.cfg.overlap:
+            return False
+        if self.num_workers > 1 or self.ray is not None:
+            log.warning("PPO: algo.ppo.overlap=true applies to collector=single; with %s the batches are collected "
+                        "synchronously (on-policy) by the worker processes", "Ray" if self.ray else
+                        f"{self.num_workers} collector workers")
+            return False
+        return True
+
     def train(self) -> dict[str, float]:
         cfg = self.cfg
         remaining = cfg.total_frames - self.frames
         if remaining < cfg.frames_per_batch:
             log.info("PPO already complete (%d/%d frames)", self.frames, cfg.total_frames)
             return {}
-        collector = make_collector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
-                                   total_frames=remaining, num_workers=self.num_workers,
-                                   seed=self.seed + 1000 * self.iteration, ray=self.ray)
+        seed = self.seed + 1000 * self.iteration
+        if self.overlaps():
+            collector = OverlappedCollector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
+                                            total_frames=remaining, seed=seed)
+            threads = torch.get_num_threads()
+            torch.set_num_threads(1)  # the learner's one intra-op thread; the collector thread has the other core
+        else:
+            collector = make_collector(self.env_fn, self.actor, frames_per_batch=cfg.frames_per_batch,
+                                       total_frames=remaining, num_workers=self.num_workers, seed=seed, ray=self.ray)
         pbar = tqdm(total=cfg.total_frames, initial=self.frames, desc="PPO", unit="f", disable=not self.progress,
                     dynamic_ncols=True)
         last: dict[str, float] = {}
@@ -334,7 +417,8 @@ class PPOTrainer:
                 self.policy.train()
                 stats = episode_stats(batch)
                 stats.update(env_episode_metrics(collector))   # adds SPL where the env can say
-                stats.update(self.update(batch))
+                stale = BEHAVIOUR_VERSION in batch.keys() and int(batch.get(BEHAVIOUR_VERSION).min()) < collector.version
+                stats.update(self.update(batch.exclude(BEHAVIOUR_VERSION), stale=stale))
                 dt_update = time.perf_counter() - t0
                 self.frames += batch.numel()
                 self.iteration += 1
@@ -354,4 +438,6 @@ class PPOTrainer:
         finally:
             pbar.close()
             collector.shutdown()
+            if isinstance(collector, OverlappedCollector):
+                torch.set_num_threads(threads)
         return last

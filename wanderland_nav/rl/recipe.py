@@ -17,9 +17,10 @@ from typing import Any, Callable
 
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.rl.bc import BCConfig
+from wanderland_nav.rl.blank_camera import BlankCamera
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
-from wanderland_nav.rl.report import SAMPLED
+from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED
 from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")
@@ -48,6 +49,7 @@ class Recipe:
     ray: dict | None = None  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
     kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
     sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
+    blank_camera_rows: bool = False  # and with its camera blanked, "<row> blank camera" (rl/blank_camera.py)
 
 
 def eval_prefix(row: str) -> str:
@@ -107,14 +109,16 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         evaluate_as(name, step, None)
         if r.sampled_rows and name != "untrained":  # the stochastic policy PPO optimises, beside its mean
             evaluate_as(name + SAMPLED, step, False)  # (experiments/train/README.md); untrained: noise either way
+        if r.blank_camera_rows and name != "untrained":  # does the trained policy use its camera at all?
+            evaluate_as(name + BLANK_CAMERA, step, None, BlankCamera(r.policy))
 
-    def evaluate_as(name: str, step: int, deterministic: bool | None) -> None:
+    def evaluate_as(name: str, step: int, deterministic: bool | None, policy=None) -> None:
         if name in results:
             return
         r.policy.eval()
         t = time.perf_counter()
         with _timed(times, f"eval {name}"):
-            res = r.evaluate(name, r.policy, r.eval_env, step, deterministic=deterministic)
+            res = r.evaluate(name, policy or r.policy, r.eval_env, step, deterministic=deterministic)
         o = res.summary["overall"]
         # logged before the result is stored: a kill in between redoes the evaluation and drops this row
         r.logger.log_scalars({f"{eval_prefix(name)}/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)

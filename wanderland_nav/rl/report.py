@@ -38,6 +38,7 @@ LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS}
 RATES = {"SR", "IR", *CAUSE_COLUMNS}
 #: suffix of a row evaluated with sampled actions (the stochastic policy) instead of the mean waypoints
 SAMPLED = " sampled"
+BLANK_CAMERA = " blank camera"  # a trained row evaluated with a black camera (rl/blank_camera.py)
 
 
 def relative_change(new: float, base: float, column: str) -> float:
@@ -164,13 +165,16 @@ def successive_pairs(rows: Sequence[str]) -> list[tuple[str, str]]:
 
     Rows evaluated with sampled actions (`"<row> sampled"`, `eval.sampled_rows`) pair among themselves, and the
     last one also with the second-to-last deterministic row (`BC+RL sampled - BC`: the policy PPO trained, as it
-    was trained, against BC's mean waypoints)."""
+    was trained, against BC's mean waypoints). A row evaluated with its camera blanked (`"<row> blank camera"`,
+    `eval.blank_camera_rows`) pairs with its own row."""
+    blank = [r for r in rows if r.endswith(BLANK_CAMERA) and r[:-len(BLANK_CAMERA)] in rows]
+    rows = [r for r in rows if not r.endswith(BLANK_CAMERA)]
     mean = [r for r in rows if not r.endswith(SAMPLED)]
     sampled = [r for r in rows if r.endswith(SAMPLED)]
     pairs = list(zip(mean[1:], mean[:-1])) + list(zip(sampled[1:], sampled[:-1]))
     if len(sampled) >= 2 and len(mean) >= 2:
         pairs.append((sampled[-1], mean[-2]))
-    return pairs
+    return pairs + [(r, r[:-len(BLANK_CAMERA)]) for r in blank]  # the camera's share of each trained row
 
 
 def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
