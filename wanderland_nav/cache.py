@@ -15,6 +15,15 @@ import os
 from pathlib import Path
 
 
+def file_sha256(path: str | os.PathLike, chunk: int = 1 << 22) -> str:
+    """sha256 hex digest of a file's bytes, streamed (a splat or a point cloud can be gigabytes)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
 def json_digest(obj) -> str:
     """16 hex digits of sha256 over `obj` as canonical JSON (sorted keys; non-JSON values via `str`)."""
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -12,7 +12,6 @@ trusted: `cp -p` / `rsync -a` replace a scan and keep its old time. All files ar
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import time
@@ -22,7 +21,7 @@ import numpy as np
 import trimesh
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json
-from wanderland_nav.cache import json_digest, read_record
+from wanderland_nav.cache import file_sha256, json_digest, read_record
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import parse_up_axis
 from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
@@ -57,8 +56,7 @@ def scene_inputs(root: Path) -> list[Path]:
 
 
 def _file_digest(path: Path) -> str:
-    with open(path, "rb") as f:  # streamed: a raw_pcd.ply can be gigabytes
-        return hashlib.file_digest(f, "sha256").hexdigest()[:16]
+    return file_sha256(path)[:16]
 
 
 def input_digests(root: Path, inputs: list[Path]) -> dict[str, str]:

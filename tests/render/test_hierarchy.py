@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from wanderland_nav.cache import file_sha256
 from wanderland_nav.render import Gaussians, render
 from wanderland_nav.render import hierarchy as hier
 from wanderland_nav.render.hierarchy import _area, build_hierarchy
@@ -188,7 +189,7 @@ def test_stale_cache_of_another_build_is_ignored(tmp_path, monkeypatch):
     path = tmp_path / "3dgs.ply"
     random_gaussians(300).save(path)
     h = load_splat(path, lod_px=1.0)
-    sha = hier.file_sha256(path)
+    sha = file_sha256(path)
     assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha) is not None
     assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256="0" * 64) is None
     monkeypatch.setattr(hier, "FORMAT_VERSION", hier.FORMAT_VERSION + 1)

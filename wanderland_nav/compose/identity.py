@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wanderland_nav.cache import file_sha256
+
 #: keys that change how a run looks, not what it computes (dotted paths into the resolved config)
 COSMETIC_KEYS = ("progress", "run_dir", "out_dir", "out", "logger", "save_rollouts", "save_frames", "exp_name",
                  "resume", "rerun", "log_every")
@@ -28,14 +30,6 @@ class RunIdentityError(RuntimeError):
 
 def _digest(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def artefact_digest(path: Path) -> str:

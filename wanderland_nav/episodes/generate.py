@@ -23,7 +23,7 @@ from typing import Any, Callable
 import numpy as np
 
 from wanderland_nav.atomic import atomic_dir
-from wanderland_nav.cache import json_digest
+from wanderland_nav.cache import file_sha256, json_digest
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.episodes.goal_images import render_goal_images
 from wanderland_nav.episodes.instructions import InstructionGenerator, Route, RuleBasedInstructions
@@ -345,8 +345,7 @@ def splat_fingerprint(scene, settings: GeneratorSettings) -> str:
     path = getattr(scene, "gaussians_path", None)
     if not settings.goal_images or path is None or not Path(path).is_file():
         return "none"
-    with open(path, "rb") as f:
-        return hashlib.file_digest(f, "sha256").hexdigest()
+    return file_sha256(path)
 
 
 def args_hash(scene_name: str, num_episodes: int, seed: int, settings: GeneratorSettings,

@@ -23,7 +23,6 @@ children cover.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -357,14 +356,6 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
 
 
 # ---- the cache beside the splat ---------------------------------------------------------------------
-
-def file_sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 24), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 def save_nodes(path: Path, nodes: InteriorNodes, *, source_sha256: str) -> None:
     """Write `nodes` as an uncompressed npz, atomically, with the splat's hash and the build settings."""

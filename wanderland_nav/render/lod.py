@@ -18,7 +18,9 @@ from pathlib import Path
 import torch
 
 from .gaussians import Gaussians
-from .hierarchy import GaussianHierarchy, build_hierarchy, file_sha256, load_nodes, save_nodes
+from wanderland_nav.cache import file_sha256
+
+from .hierarchy import GaussianHierarchy, build_hierarchy, load_nodes, save_nodes
 
 log = logging.getLogger(__name__)
 
