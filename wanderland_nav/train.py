@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import hydra
@@ -22,6 +23,7 @@ from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
+from wanderland_nav.rl.blank_camera import camera_paused
 from wanderland_nav.rl.recipe import run_recipe
 from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
@@ -47,10 +49,11 @@ def run(cfg: DictConfig) -> dict:
             log.info("eval %s per scene:\n%s", name, res.table)
             return res
         path = Path(c.save_rollouts) / f"{name.replace('+', '_')}.npz" if c.save_rollouts else None
-        return evaluate_and_record(env, actor, path, num_episodes=c.eval.episodes,
-                                   seed=c.seed, name=name, frames=wants, progress=c.progress,
-                                   logger=logger if wants else None, step=step,
-                                   episodes_path=episodes_path)
+        with nullcontext() if path or wants else camera_paused(env, policy):
+            return evaluate_and_record(env, actor, path, num_episodes=c.eval.episodes,
+                                       seed=c.seed, name=name, frames=wants, progress=c.progress,
+                                       logger=logger if wants else None, step=step,
+                                       episodes_path=episodes_path)
 
     recipe, scene = training_recipe(c, config, evaluate)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))

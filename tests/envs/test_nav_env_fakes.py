@@ -327,3 +327,25 @@ def test_sampled_evaluation_actor_is_seeded_and_restarts_its_noise_at_reset():
     assert torch.equal(draws(a), first) and first[0].abs().sum() > 0 and not torch.equal(first[0], first[1])
     assert not torch.equal(draws(PolicyActor(Mean(), deterministic=False, seed=5)), first)
     assert draws(PolicyActor(Mean(), deterministic=True)).abs().sum() == 0
+
+
+def test_blank_camera_evaluation_skips_rendering_and_keeps_every_record():
+    from policies import make_policy
+    from wanderland_nav.envs.evaluation import PolicyActor
+    from wanderland_nav.rl.blank_camera import BlankCamera, camera_paused
+
+    torch.manual_seed(0)
+    policy = make_policy("cnn", image_size=(16, 16), context=3, feature_dim=32)
+    blind = PolicyActor(BlankCamera(policy))
+    env = make_env(B=3, config=small_config())
+    rendered = run_evaluation(env, blind, num_episodes=6).records
+    calls = len(env.camera.renderer.calls)
+    assert calls > 0
+    with camera_paused(env, blind.policy):
+        assert not env.config.camera.enabled
+        paused = run_evaluation(env, blind, num_episodes=6).records
+    assert len(env.camera.renderer.calls) == calls   # nothing rendered while paused
+    assert env.config.camera.enabled                 # and the camera is back
+    assert paused == rendered
+    with camera_paused(env, policy):                 # a seeing policy is never paused
+        assert env.config.camera.enabled

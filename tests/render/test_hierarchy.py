@@ -204,3 +204,25 @@ def test_nodes_as_gaussians_render_as_the_cut():
     as_raw = h.as_gaussians(nodes)
     torch.testing.assert_close(as_raw.covariances(), h.gather(nodes)[1], rtol=1e-3, atol=1e-6)
     torch.testing.assert_close(render(as_raw, vm, K, 32, 32).rgb, render(h, vm, K, 32, 32).rgb, rtol=0, atol=2e-3)
+
+
+@pytest.mark.parametrize("mode", ["RGB+ED", "D"])
+def test_cut_pairs_render_as_padded_one_camera_scenes(mode):
+    """The torch path projects each camera's cut as given (camera, node) pairs; the gsplat path pads the cuts
+    into C one-camera scenes. Both must draw the same images (cuts of different sizes per camera)."""
+    from wanderland_nav.render import api
+
+    g = random_gaussians(3000, seed=3)
+    h = build_hierarchy(g, target_px=1.0)
+    vm = torch.cat([look_at_views(3, 12.0), look_at_views(2, 60.0)])  # near and far: unequal cuts
+    K, bg = intrinsics(5, 32), torch.tensor([0.1, 0.2, 0.3]).expand(5, 3)
+    cams, _ = h.cut(vm, K, 32, 32, 1.0)
+    counts = torch.bincount(cams, minlength=5)
+    assert counts.min() * 2 < counts.max()
+    opts = dict(near_plane=0.01, far_plane=1e10, sh_degree=h.sh_degree, render_mode=mode, rasterize_mode="classic",
+                camera_model="pinhole", chunk_elems=api.DEFAULT_CHUNK_ELEMS, compiled=False)
+    pairs = api._render_cut(api.rasterization, h, vm, K, 32, 32, bg, **opts)
+    padded = api._render_cut(lambda *a, **k: api.rasterization(*a, **k), h, vm, K, 32, 32, bg, **opts)
+    for a, b in zip(pairs, padded):
+        assert a.shape == b.shape
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)

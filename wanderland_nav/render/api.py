@@ -16,7 +16,7 @@ import torch
 
 from .gaussians import Gaussians
 from .hierarchy import GaussianHierarchy
-from .packed import project_packed
+from .packed import project_packed, project_view_pairs
 from .projection import CAMERA_MODELS, project_gaussians, quat_scale_to_covar
 from .rasterize import DEFAULT_CHUNK_ELEMS, rasterize_packed, rasterize_to_pixels
 from .sh import spherical_harmonics
@@ -223,25 +223,39 @@ def _rasterize_packed(means, covars, opacities, colors, viewmats, Ks, background
     cam, gid, proj = project(means, covars, opacities, viewmats, Ks, width, height, eps2d=eps2d,
                                     near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
                                     calc_compensations=rasterize_mode == "antialiased", camera_model=camera_model)
-    opac = opacities.reshape(B * N).index_select(0, gid)
-    if proj.compensations is not None:
-        opac = opac * proj.compensations
     src = colors.reshape((B * C * N if per_camera else B * N,) + colors.shape[3 if per_camera else 2:])
     rows = src.index_select(0, cam * N + gid % N if per_camera else gid)
-    campos = None
-    if sh_degree is not None:
-        campos = torch.linalg.inv(viewmats)[..., :3, 3].reshape(B * C, 3).index_select(0, cam)
-    cols = _view_colors(rows, sh_degree, means.reshape(B * N, 3).index_select(0, gid), campos).to(means.dtype)
-    bgs = None if backgrounds is None else backgrounds.reshape(B * C, -1).to(means.dtype)
-    cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
-    render_colors, render_alphas = rasterize_packed(
-        cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, B * C, width, height,
-        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, fused=fused)
+    render_colors, render_alphas, opac = _shade_and_composite(
+        cam, gid, proj, rows, means.reshape(B * N, 3), opacities.reshape(B * N), viewmats.reshape(B * C, 4, 4),
+        backgrounds, width=width, height=height, sh_degree=sh_degree, tile_size=tile_size, render_mode=render_mode,
+        chunk_elems=chunk_elems, schedule=schedule, fused=fused)
     meta = _meta(width, height, tile_size, C, render_mode, camera_model, rasterize_mode, camera_ids=cam % C,
                  gaussian_ids=gid % N, batch_ids=torch.div(cam, C, rounding_mode="floor"), radii=proj.radii,
                  means2d=proj.means2d, depths=proj.depths, conics=proj.conics, opacities=opac,
                  compensations=proj.compensations)
-    return _finish(render_colors, render_alphas, bgs, render_mode), render_alphas, meta
+    return render_colors, render_alphas, meta
+
+
+def _shade_and_composite(cam, gid, proj, color_rows, means, opacities, viewmats, backgrounds, *, width, height,
+                         sh_degree, tile_size, render_mode, chunk_elems, schedule, fused):
+    """The packed paths' common tail: opacity (x compensation) and view-dependent colour of the projected
+    pairs (cam [M], gid [M] into `means [rows, 3]` / `opacities [rows]`; `color_rows [M, ...]` already
+    gathered), depth channels, one binning and composite for all cameras (`viewmats [cameras, 4, 4]`), and
+    the background. -> (colors [cameras, H, W, X], alphas [cameras, H, W, 1], pair opacities [M])."""
+    n_cams = viewmats.shape[0]
+    opac = opacities.index_select(0, gid)
+    if proj.compensations is not None:
+        opac = opac * proj.compensations
+    campos = None
+    if sh_degree is not None:
+        campos = torch.linalg.inv(viewmats)[:, :3, 3].index_select(0, cam)
+    cols = _view_colors(color_rows, sh_degree, means.index_select(0, gid), campos).to(means.dtype)
+    bgs = None if backgrounds is None else backgrounds.reshape(n_cams, -1).to(means.dtype)
+    cols, bgs = _depth_channels(cols, proj.depths, bgs, render_mode)
+    render_colors, render_alphas = rasterize_packed(
+        cam, proj.means2d, proj.conics, cols, opac, proj.radii, proj.depths, n_cams, width, height,
+        tile_size=tile_size, chunk_elems=chunk_elems, schedule=schedule, fused=fused)
+    return _finish(render_colors, render_alphas, bgs, render_mode), render_alphas, opac
 
 
 def _rasterize_dense(means, covars, opacities, colors, viewmats, Ks, backgrounds, *, width, height, near_plane,
@@ -348,11 +362,16 @@ def render(
 
 @torch.no_grad()
 def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, **opts):
-    """Each camera renders its own cut of `h`: the C cameras become C one-camera scenes (gsplat's leading
-    batch dimension), each holding its cut padded to the longest with transparent rows."""
+    """Each camera renders its own cut of `h`. The torch backends project the cut's (camera, node) pairs as
+    they are (`packed.project_view_pairs`: no padding, no all-pairs bound); gsplat gets C one-camera scenes,
+    each holding its cut padded to the longest with transparent rows."""
     C = viewmats.shape[0]
     cam, node = h.cut(viewmats, Ks, width, height, h.target_px, near_plane=opts["near_plane"],
                       camera_model=opts["camera_model"])
+    if raster is rasterization:
+        means, covars, opac, sh = h.gather(node)
+        return _rasterize_view_pairs(means, covars, opac, sh, cam, viewmats, Ks, bgs, width=width, height=height,
+                                     **opts)
     counts = torch.bincount(cam, minlength=C)
     slot = torch.arange(cam.numel(), device=cam.device) - (torch.cumsum(counts, 0) - counts)[cam]
     idx = torch.full((C, max(int(counts.max()) if C else 1, 1)), -1, dtype=torch.long, device=cam.device)
@@ -364,3 +383,25 @@ def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, 
                                viewmats[:, None], Ks[:, None], width, height, covars=covars.view(C, M, 3, 3),
                                backgrounds=None if bgs is None else bgs[:, None], **opts)
     return colors[:, 0], alphas[:, 0]
+
+
+def _rasterize_view_pairs(means, covars, opac, sh, cam, viewmats, Ks, bgs, *, width, height, near_plane, far_plane,
+                          sh_degree, render_mode, rasterize_mode, camera_model, chunk_elems, compiled):
+    """Rows `[P]` each seen by camera `cam [P]` only (a per-view cut) -> (colors [C, H, W, X], alphas)."""
+    _check(rasterize_mode in RASTERIZE_MODES, f"rasterize_mode must be one of {RASTERIZE_MODES}, got {rasterize_mode!r}")
+    _check(render_mode in RENDER_MODES, f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
+    _check(camera_model in CAMERA_MODELS, f"camera_model must be one of {CAMERA_MODELS}, got {camera_model!r}")
+    dtype = means.dtype
+    viewmats, Ks = viewmats.to(dtype), Ks.to(dtype)
+    pair_fn, fused = None, None
+    if compiled:
+        from .compiled import fused_forward as fused
+        from .compiled import project_pairs_compiled as pair_fn
+    cam, rid, proj = project_view_pairs(means, covars, opac, cam, viewmats, Ks, width, height, near_plane=near_plane,
+                                        far_plane=far_plane, calc_compensations=rasterize_mode == "antialiased",
+                                        camera_model=camera_model, pair_fn=pair_fn)
+    colors, alphas, _ = _shade_and_composite(
+        cam, rid, proj, sh.index_select(0, rid), means, opac, viewmats, bgs, width=width, height=height,
+        sh_degree=sh_degree, tile_size=4 if means.device.type == "cpu" else 16, render_mode=render_mode,
+        chunk_elems=chunk_elems, schedule="auto", fused=fused)
+    return colors, alphas

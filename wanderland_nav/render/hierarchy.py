@@ -70,6 +70,7 @@ class GaussianHierarchy:
         self.num_leaves = len(leaves)
         self.root = self.num_leaves + nodes.means.shape[0] - 1 if nodes.means.shape[0] else 0
         self._start: torch.Tensor | None = None
+        self._node_means_t: torch.Tensor | None = None
         self._leaf_opacities = leaves.opacities.detach()
 
     def __len__(self) -> int:
@@ -117,21 +118,35 @@ class GaussianHierarchy:
 
     @torch.no_grad()
     def gather(self, ids: torch.Tensor):
-        """Activated parameters of nodes `ids [M]`: means [M,3], covars [M,3,3], opacities [M], sh [M,K,3]."""
+        """Activated parameters of nodes `ids [M]`: means [M,3], covars [M,3,3], opacities [M], sh [M,K,3].
+        Leaves and merged nodes live in separate tables, so the rows are split once by position (index
+        lists, not boolean masks: one `nonzero` each) and each table is read with one index_select."""
         N, g, n = self.num_leaves, self.leaves, self.nodes
         leaf = ids < N
-        li, ni = ids[leaf], ids[~leaf] - N
+        at_leaf, at_node = leaf.nonzero().squeeze(1), (~leaf).nonzero().squeeze(1)
+        li, ni = ids.index_select(0, at_leaf), ids.index_select(0, at_node) - N
         M, K = ids.shape[0], n.sh.shape[1]
-        means = g.means.new_empty(M, 3)
+        means = self.node_means_t().index_select(1, ids).t().to(g.means.dtype).contiguous()
         covars = g.means.new_empty(M, 3, 3)
         opac = g.means.new_empty(M)
         sh = g.means.new_empty(M, K, 3)
-        means[leaf], means[~leaf] = g.means.detach()[li], n.means[ni]
-        covars[leaf], covars[~leaf] = g.covariances()[li], n.covars[ni]
-        opac[leaf], opac[~leaf] = self._leaf_opacities[li], n.opacities[ni]
-        sh[leaf] = torch.cat([g.sh_dc.detach()[li, None], g.sh_rest.detach()[li]], 1)
-        sh[~leaf] = n.sh[ni]
+        covars.index_copy_(0, at_leaf, g.covariances().index_select(0, li))
+        covars.index_copy_(0, at_node, n.covars.index_select(0, ni))
+        opac.index_copy_(0, at_leaf, self._leaf_opacities.index_select(0, li))
+        opac.index_copy_(0, at_node, n.opacities.index_select(0, ni))
+        sh[:, 0].index_copy_(0, at_leaf, g.sh_dc.detach().index_select(0, li))
+        if K > 1:
+            sh[:, 1:].index_copy_(0, at_leaf, g.sh_rest.detach().index_select(0, li))
+        sh.index_copy_(0, at_node, n.sh.index_select(0, ni))
         return means, covars, opac, sh
+
+    def node_means_t(self) -> torch.Tensor:
+        """Centres of every node as coordinate rows `[3, T]` (leaves then merged nodes) in the spheres' dtype:
+        the cut and `gather` read them with one index per call. Built on first use (12 bytes per node)."""
+        if self._node_means_t is None or self._node_means_t.device != self.nodes.radius.device:
+            dtype = self.nodes.radius.dtype
+            self._node_means_t = torch.cat([self.leaves.means.detach().to(dtype), self.nodes.means.to(dtype)]).t().contiguous()
+        return self._node_means_t
 
     @torch.no_grad()
     def as_gaussians(self, ids: torch.Tensor) -> Gaussians:
@@ -156,35 +171,33 @@ class GaussianHierarchy:
         Interior nodes are culled on their spheres against the frustum widened by `CULL_MARGIN_PX`
         (pinhole only; other models cull behind the near plane only)."""
         N, n = self.num_leaves, self.nodes
-        C = viewmats.shape[0]
-        R, t = viewmats[:, :3, :3].to(n.radius.dtype), viewmats[:, :3, 3].to(n.radius.dtype)
-        f = torch.maximum(Ks[:, 0, 0], Ks[:, 1, 1]).to(n.radius.dtype)
+        pinhole = camera_model == "pinhole"
+        table = _camera_table(viewmats.to(n.radius.dtype), Ks.to(n.radius.dtype), width, height)  # [21, C]
+        means_t, radius = self.node_means_t(), n.radius
         start = self.start_nodes().to(viewmats.device)
-        cam = torch.arange(C, device=viewmats.device).repeat_interleave(start.numel())
-        node = start.repeat(C)
+        cam = torch.arange(viewmats.shape[0], device=viewmats.device).repeat_interleave(start.numel())
+        node = start.repeat(viewmats.shape[0])
         picked_cam, picked_node = [], []
         while cam.numel():
-            leaf = node < N
-            mu = torch.empty(node.shape[0], 3, dtype=n.radius.dtype, device=node.device)
-            mu[leaf], mu[~leaf] = self.leaves.means.detach()[node[leaf]].to(mu.dtype), n.means[node[~leaf] - N]
-            pc = torch.einsum("pij,pj->pi", R[cam], mu) + t[cam]  # [P, 3] camera frame
-            r = n.radius[node]
-            x, y, z = pc.unbind(-1)
+            # [k, P] rows (contiguous, one gather each): the camera's table, the node's centre and radius
+            c, m, r = table.index_select(1, cam), means_t.index_select(1, node), radius.index_select(0, node)
+            x, y, z = (c[3 * i] * m[0] + c[3 * i + 1] * m[1] + c[3 * i + 2] * m[2] + c[9 + i] for i in range(3))
+            dist = torch.sqrt(x * x + y * y + z * z)
             visible = z + r >= near_plane
-            if camera_model == "pinhole":
-                visible &= _inside_planes(x, y, z, r, Ks[cam].to(r.dtype), width, height)
-            dist = pc.norm(dim=-1)
-            if camera_model == "pinhole":  # radial magnification f d / z^2 off-axis, at the sphere's nearest depth
-                size = f[cam] * r * dist / (z.clamp_min(1e-6) * (z - r).clamp_min(1e-6))
+            if pinhole:  # the four widened side planes; radial magnification f d / z^2 off-axis, at the nearest depth
+                for i, coord in enumerate((x, x, y, y)):
+                    visible &= (c[13 + i] * coord - c[17 + i] * z) <= r
+                size = c[12] * r * dist / (z.clamp_min(1e-6) * (z - r).clamp_min(1e-6))
                 close = z - r <= near_plane
             else:
-                size = f[cam] * r / (dist - r).clamp_min(1e-6)
+                size = c[12] * r / (dist - r).clamp_min(1e-6)
                 close = dist - r <= near_plane
-            expand = visible & ~leaf & (close | (size > target_px))
-            keep = visible & ~expand
-            picked_cam.append(cam[keep])
-            picked_node.append(node[keep])
-            cam, node = self._children(cam[expand], node[expand] - N)
+            expand = visible & (node >= N) & (close | (size > target_px))
+            keep = (visible & ~expand).nonzero().squeeze(1)
+            picked_cam.append(cam.index_select(0, keep))
+            picked_node.append(node.index_select(0, keep))
+            grow = expand.nonzero().squeeze(1)
+            cam, node = self._children(cam.index_select(0, grow), node.index_select(0, grow) - N)
         cam, node = torch.cat(picked_cam), torch.cat(picked_node)
         order = torch.argsort(cam, stable=True)
         return cam[order], node[order]
@@ -194,21 +207,25 @@ class GaussianHierarchy:
         ptr = self.nodes.child_ptr
         start, count = ptr[interior], ptr[interior + 1] - ptr[interior]
         total = int(count.sum())
-        first = torch.repeat_interleave(start - (torch.cumsum(count, 0) - count), count)
-        return torch.repeat_interleave(cam, count), self.nodes.child_ids[first + torch.arange(total, device=cam.device)]
+        first = torch.repeat_interleave(start - (torch.cumsum(count, 0) - count), count, output_size=total)
+        pos = first + torch.arange(total, device=cam.device)
+        return torch.repeat_interleave(cam, count, output_size=total), self.nodes.child_ids.index_select(0, pos)
 
 
-def _inside_planes(x, y, z, r, Ks, width: int, height: int) -> torch.Tensor:
-    """Sphere (centre x, y, z camera frame, radius r; [P] each) meets the pinhole frustum widened by
-    `CULL_MARGIN_PX` pixels on each side: its signed distance to each side plane is below r."""
+def _camera_table(viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int) -> torch.Tensor:
+    """Per camera, what the cut's tests read, as rows `[21, C]` (gathered per node as contiguous rows):
+    0-8 R (row-major) and 9-11 t of cam_from_world; 12 the larger focal length; 13-20 the pinhole frustum's
+    side planes widened by `CULL_MARGIN_PX` pixels, as (a_k, b_k) with a_k = s/sqrt(1+tan^2) and
+    b_k = tan/sqrt(1+tan^2): a sphere (camera-frame centre x, y, z; radius r) meets the frustum iff
+    a_k coord_k - b_k z <= r for all four (x, x, y, y; each plane passes through the optical centre)."""
     fx, fy, cx, cy = Ks[:, 0, 0], Ks[:, 1, 1], Ks[:, 0, 2], Ks[:, 1, 2]
     m = CULL_MARGIN_PX
-    ok = torch.ones_like(z, dtype=torch.bool)
-    # plane through the optical centre: u = c + s * lim  <=>  a*z - s*x = 0 with a the tangent of the edge
-    for coord, f, lo, hi in ((x, fx, cx + m, width - cx + m), (y, fy, cy + m, height - cy + m)):
-        for tan, sign in ((hi / f, 1.0), (lo / f, -1.0)):
-            ok &= (sign * coord - tan * z) / torch.sqrt(1 + tan * tan) <= r
-    return ok
+    tans = torch.stack([(width - cx + m) / fx, (cx + m) / fx, (height - cy + m) / fy, (cy + m) / fy])  # [4, C]
+    inv = torch.rsqrt(1 + tans * tans)
+    sign = torch.tensor([1.0, -1.0, 1.0, -1.0], dtype=tans.dtype, device=tans.device)[:, None]
+    C = viewmats.shape[0]
+    return torch.cat([viewmats[:, :3, :3].reshape(C, 9).t(), viewmats[:, :3, 3].t(), torch.maximum(fx, fy)[None],
+                      sign * inv, tans * inv]).contiguous()
 
 
 def _rotation_to_quat(R: torch.Tensor) -> torch.Tensor:

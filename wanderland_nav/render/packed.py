@@ -118,13 +118,62 @@ def project_packed(
     b, c, n, mc_all = _candidate_pairs(means, covars, opacities, viewmats, Ks, width, height, near_plane, far_plane,
                                        eps2d, camera_model)
     cam, gid = b * C + c, b * N + n
-    tables = (mc_all.reshape(-1), Ks.reshape(B * C, 9).t(), viewmats[..., :3, :3].reshape(B * C, 9).t(),
+    tables = (Ks.reshape(B * C, 9).t(), viewmats[..., :3, :3].reshape(B * C, 9).t(),
               _sym6(covars).reshape(B * N, 6).t(), opacities.reshape(B * N))
-    opts = dict(width=width, height=height, eps2d=eps2d, near_plane=near_plane, far_plane=far_plane,
-                radius_clip=radius_clip, calc_compensations=calc_compensations, camera_model=camera_model)
-    # Blocks of PAIR_BLOCK pairs (camera-major order kept): every [block] temporary stays in L2.
+    mc_flat = mc_all.reshape(-1)
+
+    def centres(cam, gid):  # [M, 3] camera-frame centres of the pairs, one gather from mc_all [B, C, 3, N]
+        flat = (cam * (3 * N) + gid % N)[None, :] + (torch.arange(3, device=cam.device) * N)[:, None]
+        return mc_flat.index_select(0, flat.reshape(-1)).view(3, -1).t()
+
+    return _project_blocks(tables, cam, gid, centres, pair_fn, width=width, height=height, eps2d=eps2d,
+                           near_plane=near_plane, far_plane=far_plane, radius_clip=radius_clip,
+                           calc_compensations=calc_compensations, camera_model=camera_model)
+
+
+def project_view_pairs(
+    means: torch.Tensor,  # [P, 3] world
+    covars: torch.Tensor,  # [P, 3, 3] world
+    opacities: torch.Tensor,  # [P] activated
+    cam: torch.Tensor,  # [P] the one camera that sees each row, in 0..C-1
+    viewmats: torch.Tensor,  # [C, 4, 4] cam_from_world
+    Ks: torch.Tensor,  # [C, 3, 3]
+    width: int,
+    height: int,
+    *,
+    eps2d: float = 0.3,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    radius_clip: float = 0.0,
+    calc_compensations: bool = False,
+    camera_model: str = "pinhole",
+    pair_fn=None,
+) -> tuple[torch.Tensor, torch.Tensor, Projected]:
+    """`project_packed` for cameras that each see their own Gaussians (a per-view level-of-detail cut,
+    `hierarchy.GaussianHierarchy.cut`): the pairs are given, (cam[i], row i), so there is no all-pairs
+    bound and no padding of the cameras' sets to one size. The exact culls of `screen_space` still run,
+    so the surviving pairs are those `project_packed` keeps for C one-camera scenes. No gradient needed
+    by its caller, but nothing here stops one. -> (camera_ids [M], row ids [M] into the P rows, Projected)."""
+    C = viewmats.shape[0]
+    R9, t3 = viewmats[:, :3, :3].reshape(C, 9).t(), viewmats[:, :3, 3].t()  # [9, C], [3, C]
+    tables = (Ks.reshape(C, 9).t(), R9, _sym6(covars).t(), opacities)
+    mT = means.t()  # [3, P]: contiguous coordinate rows
+
+    def centres(cam, gid):  # [M, 3] = R[cam] @ means[gid] + t[cam], as contiguous [M] row ops
+        r, t, m = R9.index_select(1, cam), t3.index_select(1, cam), mT.index_select(1, gid)
+        return torch.stack([r[3 * k] * m[0] + r[3 * k + 1] * m[1] + r[3 * k + 2] * m[2] + t[k] for k in range(3)], 1)
+
+    return _project_blocks(tables, cam, torch.arange(cam.numel(), device=cam.device), centres, pair_fn,
+                           width=width, height=height, eps2d=eps2d, near_plane=near_plane, far_plane=far_plane,
+                           radius_clip=radius_clip, calc_compensations=calc_compensations, camera_model=camera_model)
+
+
+def _project_blocks(tables, cam, gid, centres, pair_fn, **opts):
+    """`pair_fn` (default `_project_pairs`) over blocks of PAIR_BLOCK pairs, camera-major order kept, so
+    that every [block] temporary stays in L2; `centres(cam, gid)` gives each block's camera-frame centres."""
     pair_fn = _project_pairs if pair_fn is None else pair_fn
-    parts = [pair_fn(tables, cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK], N, **opts)
+    parts = [pair_fn(tables, cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK],
+                     centres(cam[i:i + PAIR_BLOCK], gid[i:i + PAIR_BLOCK]), **opts)
              for i in range(0, max(cam.numel(), 1), PAIR_BLOCK)]
     if len(parts) == 1:
         return parts[0]
@@ -133,16 +182,14 @@ def project_packed(
             Projected(*(cat([getattr(p[2], f.name) for p in parts]) for f in dataclasses.fields(Projected))))
 
 
-def _project_pairs(tables, cam: torch.Tensor, gid: torch.Tensor, N: int, *, width, height, eps2d, near_plane,
-                   far_plane, radius_clip, calc_compensations, camera_model):
-    """EWA projection of the candidate pairs (cam [M], gid [M]); -> the pairs with radii > 0 and their
-    `Projected`. tables: mc_all flat, Ks [9, B*C], R [9, B*C], cov6 [6, B*N], opacities [B*N]."""
-    mc_flat, Ks9, R9, cov6, opacities = tables
+def _project_pairs(tables, cam: torch.Tensor, gid: torch.Tensor, mc: torch.Tensor, *, width, height, eps2d,
+                   near_plane, far_plane, radius_clip, calc_compensations, camera_model):
+    """EWA projection of the candidate pairs (cam [M], gid [M]) with camera-frame centres mc [M, 3]; -> the
+    pairs with radii > 0 and their `Projected`. tables: Ks [9, cameras], R [9, cameras], cov6 [6, rows],
+    opacities [rows]."""
+    Ks9, R9, cov6, opacities = tables
     M = cam.numel()
-    n = gid % N
     # Per-pair quantities as contiguous rows [k, M] (one gather each), viewed as [M, k] where needed.
-    flat = (cam * (3 * N) + n)[None, :] + (torch.arange(3, device=cam.device) * N)[:, None]  # [3, M] into mc_all
-    mc = mc_flat.index_select(0, flat.reshape(-1)).view(3, M).t()  # [M, 3] camera frame
     Ks = Ks9.index_select(1, cam).t().view(M, 3, 3)
     if camera_model == "pinhole":  # J's four non-zero entries, no [M, 2, 3] stack and transposed copy
         u, v, j00, j02, j11, j12 = pinhole_terms(mc, Ks, width, height)

@@ -8,6 +8,8 @@ The row is named `<row>` + `rl.report.BLANK_CAMERA` ("BC+RL blank camera").
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import torch
 from tensordict import TensorDictBase
 
@@ -33,3 +35,20 @@ class BlankCamera(torch.nn.Module):
 
     def reset(self, mask: torch.Tensor | None = None) -> None:
         return self.policy.reset(mask)
+
+
+@contextmanager
+def camera_paused(env, policy):
+    """While `policy` is a `BlankCamera` and the env emits no depth, the env's camera renders nothing: the
+    policy would see black frames either way and the dynamics never read a frame, so the episodes are the
+    same as with rendering, at the cost of the env's physics and the policy only. Recorded evaluations keep
+    rendering (the caller does not pause them): a recording shows what the camera saw."""
+    cam = getattr(getattr(env, "config", None), "camera", None)
+    pause = isinstance(policy, BlankCamera) and cam is not None and cam.enabled and not cam.depth
+    if pause:
+        cam.enabled = False
+    try:
+        yield
+    finally:
+        if pause:
+            cam.enabled = True
