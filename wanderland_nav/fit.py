@@ -12,21 +12,14 @@ Examples:
 
 from __future__ import annotations
 
-import os
+import sys
 
-# Before torch (and its OpenMP runtime) loads: threads that spin while waiting burn the CPU other
-# processes need on a shared machine; on the 2-core dev box (load ~15) a 48 px render took 12 s
-# wall with spinning and 0.08 s with passive waiting. Users can still set the variable themselves.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import hydra
+from omegaconf import DictConfig, OmegaConf
 
-import sys  # noqa: E402
-
-import hydra  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-
-from wanderland_nav.compose import scene_overrides, typed_config  # noqa: E402
-from wanderland_nav.compose.fitting import fit_parts  # noqa: E402
-from wanderland_nav.compose.schema import FitRunConfig  # noqa: E402
+from wanderland_nav.compose import scene_overrides, typed_config
+from wanderland_nav.compose.fitting import fit_parts
+from wanderland_nav.compose.schema import FitRunConfig
 
 
 def run_fit(cfg) -> dict:

@@ -12,11 +12,7 @@ Examples:
 
 from __future__ import annotations
 
-import os
 import sys
-
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as in fit.py: no spinning OpenMP threads on shared CPUs
-
 from pathlib import Path
 
 import hydra
