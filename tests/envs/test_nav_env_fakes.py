@@ -185,12 +185,16 @@ def test_expert_succeeds_and_random_does_not(mode):
 def test_evaluation_does_not_depend_on_batch_size():
     c = small_config()
     c.episode_order = "iterate"
-    recs = []
+    recs, rendered = [], []
     for B in (1, 4):
         env = make_env(B=B, config=c)
         res = run_evaluation(env, ExpertPolicy(env), num_episodes=5)
         recs.append(sorted((r["serial"], r["steps"], round(r["path_length"], 4)) for r in res.records))
+        rendered.append(sum(env.camera.renderer.calls))
+        assert env.count_serials is None                      # restored after the evaluation
     assert recs[0] == recs[1]
+    # B = 4 starts episodes past the fifth while the last ones finish; their agents are not rendered
+    assert rendered[1] == rendered[0]
 
 
 def test_goal_images_from_files_and_rendered(tmp_path):

@@ -88,13 +88,23 @@ class AgentCamera:
         return self.cfg.render_threads if self.cfg.render_threads is not None else available_cores()
 
     @torch.no_grad()
-    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
+    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor, rows: torch.Tensor | None = None):
         """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None.
+
+        rows: bool `[B]`, the cameras to render; the others get black frames and zero depth (agents whose
+        frames nobody reads, e.g. an evaluation's episodes past the last one it counts). None: all.
 
         The B cameras are rendered in groups of `group_size(B, render_chunk)` (one batched renderer
         call each, which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
         backend, `workers()` threads render them concurrently on one intra-op thread each
         (`render.shards`): same images for any thread count."""
+        if rows is not None and not bool(rows.all()):
+            idx = rows.nonzero().squeeze(1)
+            part_rgb, part_depth = self.render(position_nav.index_select(0, idx), yaw.index_select(0, idx))
+            rgb = part_rgb.new_zeros((rows.shape[0],) + part_rgb.shape[1:]).index_copy_(0, idx, part_rgb)
+            depth = None if part_depth is None else part_depth.new_zeros(
+                (rows.shape[0],) + part_depth.shape[1:]).index_copy_(0, idx, part_depth)
+            return rgb, depth
         B = position_nav.shape[0]
         H, W = self.cfg.height, self.cfg.width
         rgb = torch.empty(B, H, W, 3, dtype=torch.uint8, device=self.device)

@@ -40,8 +40,10 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
         raise ValueError(f"run_evaluation: num_episodes must be >= 1, got {num_episodes}")
     B = env.batch_size[0]
     budget = (math.ceil(n / B) + 1) * (env.config.termination.max_steps + 1)  # every episode ends by timeout
-    order = env.config.episode_order
+    order, counted = env.config.episode_order, getattr(env, "count_serials", None)
     env.config.episode_order = "iterate"
+    if hasattr(env, "count_serials"):  # episodes started after the first n are not rendered: nobody reads them
+        env.count_serials = n
     got: dict[int, EpisodeMetrics] = {}
     bar = None
     if progress:
@@ -68,6 +70,8 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
             raise RuntimeError(f"run_evaluation: only {len(got)}/{n} episodes ended within {budget} steps")
     finally:
         env.config.episode_order = order
+        if hasattr(env, "count_serials"):
+            env.count_serials = counted
         if bar is not None:
             bar.close()
     metrics = [got[i] for i in range(n)]

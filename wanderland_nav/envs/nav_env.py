@@ -169,6 +169,9 @@ class NavEnv(EnvBase):
         # were ~85 % of a B=256 step (TorchRL's reset `where` and copies over them); blank goal views and
         # 512 instruction tokens were ~53 KB of ~300 KB per agent-step of a point-goal run at 128 px.
         self.carries_frames = cfg.camera.enabled
+        # episodes with a start serial >= this are not counted by anyone (an evaluation of its first n episodes
+        # sets n): their agents step on, with black frames instead of renders. None: every agent renders.
+        self.count_serials: int | None = None
         has_view, has_text = bool(self._has_goal_image.any()), bool(self.table.instruction_tokens.any())
         self.carries_goal_views = has_view if cfg.observe_goal_image is None else cfg.observe_goal_image
         self.carries_instruction = has_text if cfg.observe_instruction is None else cfg.observe_instruction
@@ -327,7 +330,8 @@ class NavEnv(EnvBase):
         self._collisions = self._collisions + collided.long()
         self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
         t2 = time.perf_counter()
-        rgb, depth = self.camera.render(end, plan_yaw) if cfg.camera.enabled and self.carries_frames else (None, None)
+        rgb, depth = self.camera.render(end, plan_yaw, self._counted()) if cfg.camera.enabled and self.carries_frames \
+            else (None, None)
         t3 = time.perf_counter()
         self._push_frame(rgb, depth, end)
         terminated = success | intervention
@@ -384,7 +388,7 @@ class NavEnv(EnvBase):
         render = self.carries_frames and self.config.camera.enabled  # switched off later: the history stays
         if render:
             t0 = time.perf_counter()
-            rgb, depth = self.camera.render(pos, yaw)
+            rgb, depth = self.camera.render(pos, yaw, None if self.count_serials is None else serial < self.count_serials)
             self.timings["reset_render"] += time.perf_counter() - t0
         d0 = self.shortest_length[ep]
         put = lambda state, new: state.index_copy(0, idx, new.to(state.dtype))  # noqa: E731
@@ -470,6 +474,10 @@ class NavEnv(EnvBase):
         return out
 
     # ------------------------------------------------------------------ observations
+
+    def _counted(self) -> torch.Tensor | None:
+        """bool `[B]`: the agents whose current episode is counted (`count_serials`); None: all of them."""
+        return None if self.count_serials is None else self._serial < self.count_serials
 
     def _push_frame(self, rgb: torch.Tensor, depth: torch.Tensor | None, pos: torch.Tensor) -> None:
         if rgb is not None:  # camera off: no frames (or, switched off later, the history stays)
