@@ -24,7 +24,7 @@ import sys  # noqa: E402
 import hydra  # noqa: E402
 from omegaconf import DictConfig, OmegaConf  # noqa: E402
 
-from wanderland_nav.compose import scene_overrides, typed_config  # noqa: E402
+from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config  # noqa: E402
 from wanderland_nav.compose.fitting import fit_parts  # noqa: E402
 from wanderland_nav.compose.schema import FitRunConfig  # noqa: E402
 
@@ -45,11 +45,16 @@ def run_fit(cfg) -> dict:
     return results
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="fit")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="fit")
+def hydra_main(cfg: DictConfig) -> None:
     run_fit(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-fit` and `python -m wanderland_nav.fit`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

@@ -24,7 +24,7 @@ from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import StudyConfig, study_config
 from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
 from wanderland_nav.compose.study_report import write_study_outputs
-from wanderland_nav.compose.cli import quote_overrides
+from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
 from wanderland_nav.train import run as train_run
 
 
@@ -59,13 +59,18 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="study")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="study")
+def hydra_main(cfg: DictConfig) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
                         force=True)
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-study` and `python -m wanderland_nav.study`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()
