@@ -38,11 +38,6 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     cells = plan_cells(c.study)
     execute = StudyCells(c, out, train_run, cells)
     execute.check_trained_recipes(Manifest(out / MANIFEST))  # a stale policy is refused, never reused
-    if c.backfill_bc_rounds:  # per-round BC checkpoints for cells made before recipe.py kept them; runs no cell
-        from wanderland_nav.compose.study_backfill import backfill_bc_rounds
-
-        backfill_bc_rounds(execute, Manifest(out / MANIFEST), list(c.backfill_bc_rounds), out, c.backfill_max_weight_gap)
-        return {}
     # report_only: the tables of what other study processes have finished so far, running no cell
     manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}

@@ -169,9 +169,9 @@ def test_bc_round_phases_are_fixed_policies_with_their_own_checkpoint(tmp_path):
     for bad in ("BC-round0", "BC-round", "BC-roundx"):
         with pytest.raises(ValueError, match="BC-round<k>"):
             plan_cells(_config(tmp_path, fixed_policies=[bad]).study)
-    ex = StudyCells(c, tmp_path, None, cells)  # the train cell ran before per-round checkpoints existed
+    ex = StudyCells(c, tmp_path, None, cells)  # the train cell's folder lacks its checkpoints
     with pytest.raises(FileNotFoundError, match=r"bc_round1.pt: the BC-round1 checkpoint of train/grounded/seed0 is "
-                                                r"missing[\s\S]*study_backfill"):
+                                                r"missing; delete that cell's folder"):
         ex(r1[0], tmp_path / "eval")
 
 

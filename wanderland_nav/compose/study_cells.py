@@ -238,10 +238,9 @@ class StudyCells:
 
         s = self.c.study
         ckpt = self.cell_dir(self.needs_producer(cell)) / phase_checkpoint(cell.policy[1])
-        if not ckpt.is_file():  # e.g. a train cell finished before recipe.py kept a checkpoint per BC round
-            raise FileNotFoundError(f"{ckpt}: the {cell.policy[1]} checkpoint of {self.needs_producer(cell)} is missing "
-                                    "(a train cell made before per-round BC checkpoints? "
-                                    "python -m wanderland_nav.compose.study_backfill re-creates them)")
+        if not ckpt.is_file():  # a train cell never deletes its checkpoints: its folder was changed by hand
+            raise FileNotFoundError(f"{ckpt}: the {cell.policy[1]} checkpoint of {self.needs_producer(cell)} is missing; "
+                                    "delete that cell's folder to train it again")
         scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
         routes = {}
         if cell.protocol == "grounded_routes":  # the grounded test routes mapped into this env (counted drops)

@@ -81,8 +81,6 @@ class StudyConfig:
     out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
     threads: Optional[int] = None  # torch intra-op threads for every cell
     report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
-    backfill_bc_rounds: Optional[List[str]] = None  # envs whose done train cells get bc_round<k>.pt (study_backfill)
-    backfill_max_weight_gap: float = 0.0  # 0: only a bit-equal re-run of the cell's BC is copied (study_backfill)
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
 
