@@ -23,7 +23,7 @@ from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
+from wanderland_nav.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 

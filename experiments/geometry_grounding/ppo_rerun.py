@@ -34,7 +34,7 @@ from wanderland_nav.compose.cli import compose_config
 from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import study_config
 from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells
-from wanderland_nav.rl.report import seed_table
+from wanderland_nav.report import seed_table
 
 
 TRACKED = "BC+RL tracked"  # the phase label of the new (tracked-target) PPO's policies in the misranking grid

@@ -198,7 +198,7 @@ class EvalSettings:
     episodes: Optional[int] = at_least(1, None)
     batch_size: int = at_least(1, 25)
     deterministic: bool = True
-    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
+    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; report.SAMPLED)
     blank_camera_rows: bool = True  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
 
 

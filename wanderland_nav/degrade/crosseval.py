@@ -4,7 +4,7 @@ Input is per-episode records keyed `(eval env, seed, trained-in env, phase)` (`c
 
 * Table 3: every policy (untrained; BC and BC+RL trained in each environment) evaluated in the GROUNDED
   environment on its test split, with paired differences vs the grounded-trained BC+RL policy and vs
-  the untrained one (same episodes and seeds: `rl.report.seed_table`).
+  the untrained one (same episodes and seeds: `report.seed_table`).
 * Fig. 8: the same fixed, grounded-trained policies evaluated in every environment, each on its own
   test split. Does a degraded environment change SR / IR and the ranking? Ranking agreement is
   Kendall's tau-b between the policies' scores in the grounded and in the degraded environment, with a
@@ -20,7 +20,7 @@ from typing import Mapping, Sequence
 
 import torch
 
-from wanderland_nav.rl.report import FIELDS, estimate, seed_table
+from wanderland_nav.report import FIELDS, estimate, seed_table
 from wanderland_nav.stats import Estimate
 
 GROUNDED = "grounded"
