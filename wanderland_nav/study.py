@@ -5,7 +5,7 @@ in every environment on its own episodes (each a `train` run; with `study.ppo_st
 cell from that run's BC, e.g. `+study=grounding_recipe`: the learning recipe's budget), evaluates every policy in the grounded
 environment (Table-3 analogue) and the fixed grounded-trained policies in every environment (Fig.-8
 analogue), then writes `<out>/table.txt`, `fig8.png` and `meshes.rrd`. Each step is a cell of
-`compose/study_plan.py` with its own folder and hash; starting the same command again skips finished
+`grounding_study/plan.py` with its own folder and hash; starting the same command again skips finished
 cells (`<out>/done.json`). Sizes: `conf/study/grounding.yaml`; `debug=smoke` shrinks everything to minutes.
 """
 
@@ -20,11 +20,11 @@ import hydra
 import torch
 from omegaconf import DictConfig
 
-from wanderland_nav.compose.study_cells import StudyCells
-from wanderland_nav.compose.study_config import StudyConfig, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
-from wanderland_nav.compose.study_report import write_study_outputs
 from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
+from wanderland_nav.compose.study_config import StudyConfig, study_config
+from wanderland_nav.grounding_study.cells import StudyCells
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
+from wanderland_nav.grounding_study.report import write_study_outputs
 from wanderland_nav.train import run as train_run
 
 

@@ -43,7 +43,7 @@ class StudyGroup:
     fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
     table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
     # Fig. 8 in a degraded env: "own" = its own test episodes; "grounded_routes" = the grounded test episodes
-    # mapped into its frame (the paper's protocol, `compose/study_routes.py`); the grounded env has one set
+    # mapped into its frame (the paper's protocol, `grounding_study/routes.py`); the grounded env has one set
     protocols: List[str] = field(default_factory=lambda: list(PROTOCOLS))
     ranked_phases: List[str] = field(default_factory=lambda: ["BC+RL"])  # degraded-trained policies added to the
     # Fig.-8 ranking (evaluated on the grounded routes in every env), so Kendall tau has more than 3 policies

@@ -1,6 +1,6 @@
 """Cross-evaluation tables of the grounding study: the paper's Table 3 and Fig. 8 analogues.
 
-Input is per-episode records keyed `(eval env, seed, trained-in env, phase)` (`compose.study_cells`).
+Input is per-episode records keyed `(eval env, seed, trained-in env, phase)` (`grounding_study.cells`).
 
 * Table 3: every policy (untrained; BC and BC+RL trained in each environment) evaluated in the GROUNDED
   environment on its test split, with paired differences vs the grounded-trained BC+RL policy and vs
