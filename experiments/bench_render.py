@@ -17,19 +17,19 @@ Env operating points (`--env`): the Gaussians (all, or training's `--lod-px` LOD
 agent cameras of a `NavEnv` reset on the tiny demo scene; prints a per-stage CPU-time profile of
 the dense reference (projection, colours, binning, composite) and of the packed fast path, then
 renders/s of `render()` (eager) and of the compiled path, and the PSNR between the two. The stage
-functions exist in both the old and the new code, so `PYTHONPATH=<old checkout>` profiles the old.
+functions exist in both the old and the new code, so run from an older checkout's root it profiles that code.
 `--env --groups`: the same cameras rendered in groups of 1..64 cameras per call (the env's render
 groups on threads, `render/shards.py`): total CPU, per-group cost and the 2-thread makespan.
 
-Usage:
-  python experiments/bench_render.py                     # quick table (CPU, 2 threads)
-  python experiments/bench_render.py --env --batch 64 --res 32 --lod-px 1 [--compiled]
-  python experiments/bench_render.py --env --groups --batch 64 --res 32 --lod-px 1 --repeat 2
-  python experiments/bench_render.py --only 50000,64,1,fwd --compiled   # compiled vs eager rows
-  python experiments/bench_render.py --psnr 64           # compiled vs eager PSNR on guitar.ply, playbot.ply
-  python experiments/bench_render.py --threads 1 --baseline
-  python experiments/bench_render.py --full              # every N x size x C combination
-  python experiments/bench_render.py --device cuda       # when a GPU is available
+Usage (from the repository root):
+  python -m experiments.bench_render                     # quick table (CPU, 2 threads)
+  python -m experiments.bench_render --env --batch 64 --res 32 --lod-px 1 [--compiled]
+  python -m experiments.bench_render --env --groups --batch 64 --res 32 --lod-px 1 --repeat 2
+  python -m experiments.bench_render --only 50000,64,1,fwd --compiled   # compiled vs eager rows
+  python -m experiments.bench_render --psnr 64           # compiled vs eager PSNR on guitar.ply, playbot.ply
+  python -m experiments.bench_render --threads 1 --baseline
+  python -m experiments.bench_render --full              # every N x size x C combination
+  python -m experiments.bench_render --device cuda       # when a GPU is available
 """
 
 from __future__ import annotations
@@ -51,12 +51,13 @@ REPO = Path(__file__).resolve().parents[1]
 SPLAT = REPO.parent / "shared" / "data" / "splats" / "guitar.ply"
 
 
-def _scene(n: int, C: int, size: int, device: str):
+def _scene(n: int, C: int, size: int, device: str, splat: Path = SPLAT):
+    """N Gaussians drawn from `splat` (jittered), C orbit cameras at 1.3x its extent looking at its centre."""
     import torch
 
     from wanderland_nav.render import Gaussians
 
-    g = Gaussians.load(SPLAT, device=device)
+    g = Gaussians.load(splat, device=device)
     gen = torch.Generator(device="cpu").manual_seed(0)
     ext = (g.means.quantile(0.95, 0) - g.means.quantile(0.05, 0)).max()
     if n != len(g):
@@ -190,6 +191,24 @@ def _child(cfg: dict) -> dict:
     return out
 
 
+def splat_psnr(size: int) -> None:
+    """Compiled vs eager on the real splats: 8 orbit cameras around each."""
+    import torch
+
+    from experiments.render_env_profile import psnr
+    from wanderland_nav.render import Gaussians, rasterization
+
+    for name in ("guitar.ply", "playbot.ply"):
+        splat = SPLAT.with_name(name)
+        g, V, K = _scene(len(Gaussians.load(splat)), 8, size, "cpu", splat)
+        args = (g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, V, K, size, size)
+        with torch.no_grad():
+            eager = rasterization(*args, sh_degree=g.sh_degree)[0]
+            comp = rasterization(*args, sh_degree=g.sh_degree, compiled=True)[0]
+        print(f"{name}: {len(g)} Gaussians, SH degree {g.sh_degree}, 8 cameras {size}x{size}: "
+              f"PSNR compiled vs eager {psnr(comp, eager):.1f} dB, max |diff| {float((comp - eager).abs().max()):.2e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
@@ -220,7 +239,7 @@ def main() -> None:
 
         torch.set_num_threads(a.threads)
         print(f"threads={a.threads}; load avg {os.getloadavg()}")
-        from render_env_profile import dump_views, env_profile, group_costs, splat_psnr, views_costs
+        from experiments.render_env_profile import dump_views, env_profile, group_costs, views_costs
         if a.views:
             views_costs(a.views, [int(x) for x in a.sizes.split(",")], a.repeat)
         elif a.env and a.dump_views:
@@ -230,7 +249,7 @@ def main() -> None:
         elif a.env:
             env_profile(a.batch, a.res, a.lod_px, a.repeat, a.compiled)
         else:
-            splat_psnr(a.psnr, a.threads)
+            splat_psnr(a.psnr)
         return
 
     if a.only:

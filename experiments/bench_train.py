@@ -51,7 +51,8 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
     policy = make_policy(name, **DEMO[name])
     trainer = PPOTrainer.__new__(PPOTrainer)  # only the loss + optimiser, no env
     PPOTrainer.__init__(trainer, policy, lambda: None, PPOConfig(total_frames=frames, frames_per_batch=frames,
-                        minibatch_size=minibatch, epochs=1, target_kl=None, action_dist="waypoints"), logger=None, progress=False)
+                        minibatch_size=minibatch, epochs=1, target_kl=None, action_dist="waypoints", lr=1e-4,
+                        critic_warmup_iters=0, critic_epochs=10, overlap=False), logger=None, progress=False)
     actor = make_actor(policy)
     obs = synthetic(actor_batch, policy, policy.num_waypoints)
     with torch.no_grad():
@@ -112,7 +113,8 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
     env_fn = env_factory(scene, episodes, cfg, split="train", batch_size=batch, seed=0, device="cpu",
                          navmesh=load_navmesh(scene), gaussians=g)
     tr = PPOTrainer(policy, env_fn,
-                    PPOConfig(total_frames=fpb * iterations, frames_per_batch=fpb, minibatch_size=fpb // 4),
+                    PPOConfig(total_frames=fpb * iterations, frames_per_batch=fpb, minibatch_size=fpb // 4, lr=1e-4,
+                              critic_warmup_iters=0, critic_epochs=10, overlap=False),
                     logger=lg, progress=False, kinematics=cfg.kinematics)
     tr.train()
     last = lg.rows[-1]

@@ -1,4 +1,4 @@
-"""Renderer figures at the simulator's operating points (used by `bench_render.py --env / --psnr`).
+"""Renderer figures at the simulator's operating points (`python -m experiments.bench_render --env`).
 
 Why a separate file: the cameras come from a real `NavEnv` reset on the tiny demo scene (built under
 `data/scenes/bench` by `bench_env.prepare` on first use), so the profile measures the poses, culling
@@ -22,7 +22,7 @@ def env_views(B: int, res: int, lod_px: float | None):
     """(Gaussians, viewmats [B,4,4], Ks [B,3,3]) of the B agents right after a seeded env reset.
 
     The stage profiles take raw Gaussians: with `lod_px` set, those of the union of the B cameras' cuts."""
-    from bench_env import prepare
+    from experiments.bench_env import prepare
 
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.camera import AgentCamera, camera_intrinsics
@@ -127,35 +127,12 @@ def env_profile(B: int, res: int, lod_px: float | None, repeat: int, compiled: b
             print(f"  {name:16s} first call {first:7.2f} s; best {1e3 * wall:8.1f} ms wall {1e3 * cpu:8.1f} ms cpu "
                   f"-> {B / wall:8.1f} renders/s wall, {B / cpu:8.1f} per cpu-s")
         if compiled:
-            print(f"  PSNR compiled vs eager: {_psnr(images['compiled'], images['eager (default)']):.1f} dB")
+            print(f"  PSNR compiled vs eager: {psnr(images['compiled'], images['eager (default)']):.1f} dB")
 
 
-def _psnr(a: torch.Tensor, b: torch.Tensor) -> float:
+def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
     mse = float(((a.clamp(0, 1) - b.clamp(0, 1)) ** 2).mean())
     return float("inf") if mse == 0 else 10.0 * torch.log10(torch.tensor(1.0 / mse)).item()
-
-
-def splat_psnr(size: int, threads: int) -> None:
-    """Compiled vs eager on the real splats: 8 orbit cameras around each (bench_render's scene)."""
-    import bench_render
-    from wanderland_nav.render import rasterization
-
-    for name in ("guitar.ply", "playbot.ply"):
-        bench_render.SPLAT = REPO.parent / "shared" / "data" / "splats" / name
-        g, V, K = _scene_all(bench_render, 8, size)
-        args = (g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, V, K, size, size)
-        with torch.no_grad():
-            eager = rasterization(*args, sh_degree=g.sh_degree)[0]
-            comp = rasterization(*args, sh_degree=g.sh_degree, compiled=True)[0]
-        print(f"{name}: {len(g)} Gaussians, SH degree {g.sh_degree}, 8 cameras {size}x{size}: "
-              f"PSNR compiled vs eager {_psnr(comp, eager):.1f} dB, max |diff| {float((comp - eager).abs().max()):.2e}")
-
-
-def _scene_all(bench_render, C: int, size: int):
-    from wanderland_nav.render import Gaussians
-
-    n = len(Gaussians.load(bench_render.SPLAT))
-    return bench_render._scene(n, C, size, "cpu")
 
 
 def group_costs(B: int, res: int, lod_px: float | None, repeat: int) -> None:

@@ -7,6 +7,10 @@ fit in the test budget.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
+import os
 import re
 from pathlib import Path
 
@@ -60,15 +64,71 @@ def test_every_config_file_is_composed_somewhere():
     assert every - covered == set(), f"config files no test composes: {sorted(every - covered)}"
 
 
+DIGESTS = Path(__file__).with_name("config_digests.json")
+UPDATE_DIGESTS = os.environ.get("WANDERLAND_UPDATE_CONFIG_DIGESTS") == "1"
+_seen_digests: dict[str, dict] = {}
+
+
+def _job_id(primary: str, overrides: list[str]) -> str:
+    return f"{primary}:{','.join(overrides) or '-'}"
+
+
+def config_digests(cfg, typed) -> dict:
+    """`identity`: the config part of the run identity (`compose.identity.run_identity`, what names run folders
+    and is stored in checkpoints); `typed`: the values the run is built from, the policy's included."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import InterpolationResolutionError
+
+    from policies import policy_config
+    from wanderland_nav.compose.identity import run_identity
+
+    try:
+        raw = OmegaConf.to_container(cfg, resolve=True)
+    except InterpolationResolutionError:  # `study` without `+study=` names no study yet
+        raw = OmegaConf.to_container(cfg, resolve=False)
+    values = dataclasses.asdict(typed)
+    if "policy" in cfg:
+        kwargs = {k: v for k, v in raw["policy"].items() if k != "name"}
+        values["policy"] = dataclasses.asdict(policy_config(raw["policy"]["name"], **kwargs))
+    typed_digest = hashlib.sha256(json.dumps(values, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return {"identity": run_identity(raw, {})["hash"], "typed": typed_digest}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _write_digests():
+    """WANDERLAND_UPDATE_CONFIG_DIGESTS=1: record the digests of every composition `test_compose` saw."""
+    yield
+    if UPDATE_DIGESTS and _seen_digests:
+        from wanderland_nav.atomic import atomic_write_text
+
+        recorded = json.loads(DIGESTS.read_text()) if DIGESTS.is_file() else {}
+        recorded = {k: v for k, v in {**recorded, **_seen_digests}.items() if k in {_job_id(p, o) for p, o, _ in JOBS}}
+        lines = [f" {json.dumps(k)}: {json.dumps(v, sort_keys=True)}" for k, v in sorted(recorded.items())]
+        atomic_write_text(DIGESTS, "{\n" + ",\n".join(lines) + "\n}\n")  # a line per composition: merges
+
+
 @pytest.mark.parametrize("primary,overrides", [(p, o) for p, o, _ in JOBS],
-                         ids=[f"{p}:{','.join(o) or '-'}" for p, o, _ in JOBS])
+                         ids=[_job_id(p, o) for p, o, _ in JOBS])
 def test_compose(primary, overrides):
-    """Composes, and every key has the schema's type (an unknown key or a wrong type would raise)."""
+    """Composes, every key has the schema's type (an unknown key or a wrong type would raise), and the
+    composed values are the recorded ones: a refactor of the config files or of the dataclass defaults must
+    leave every run's identity and values as they were. A deliberate change of a value records the new
+    digests (`WANDERLAND_UPDATE_CONFIG_DIGESTS=1 pytest tests/test_configs.py -k test_compose`), and runs of
+    the changed compositions get new run folders."""
     from wanderland_nav.compose import SCHEMAS, typed_config
 
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(primary, overrides=overrides, return_hydra_config=False)
-    assert type(typed_config(cfg, SCHEMAS[primary])) is SCHEMAS[primary]
+    typed = typed_config(cfg, SCHEMAS[primary])
+    assert type(typed) is SCHEMAS[primary]
+    job, digests = _job_id(primary, overrides), config_digests(cfg, typed)
+    if UPDATE_DIGESTS:
+        _seen_digests[job] = digests
+        return
+    recorded = json.loads(DIGESTS.read_text()).get(job)
+    assert recorded == digests, (
+        f"{job}: the composed config is not the recorded one ({recorded} -> {digests}); if the change is meant, "
+        f"record it with WANDERLAND_UPDATE_CONFIG_DIGESTS=1 pytest tests/test_configs.py -k test_compose")
 
 
 @pytest.mark.parametrize("primary", PRIMARIES)

@@ -121,3 +121,31 @@ def test_part_imports_only_what_its_row_allows(part):
 ])
 def test_an_upward_import_is_caught(rel, source):
     assert violations(rel, source), f"{rel}: the checker missed {source!r}"
+
+
+def experiment_imports(path: Path, experiments: Path) -> set[Path]:
+    """The experiment scripts `path` imports: `experiments.<module>` from the repository root, or a bare name
+    of a file beside it (a script run as `python experiments/<folder>/<script>.py` sees its own folder)."""
+    out = set()
+    for module in imported_modules(path.read_text()):
+        if module.startswith("experiments."):
+            out.add(REPO.joinpath(*module.split(".")).with_suffix(".py"))
+        elif (path.parent / f"{module.split('.')[0]}.py").is_file():
+            out.add(path.parent / f"{module.split('.')[0]}.py")
+    return {p for p in out if p.is_file() and p.is_relative_to(experiments)}
+
+
+def test_experiment_scripts_import_one_way_without_path_edits():
+    """Scripts run on their own: no `sys.path` edits, and no two of them import each other (at any distance)."""
+    experiments = REPO / "experiments"
+    scripts = sorted(experiments.rglob("*.py"))
+    edits = [str(p.relative_to(REPO)) for p in scripts if re.search(r"sys\.path\.(insert|append)", p.read_text())]
+    assert not edits, f"sys.path edits in {edits}: run the script as `python -m experiments.<path>` instead"
+    graph = {p: experiment_imports(p, experiments) for p in scripts}
+
+    def reaches(start: Path, goal: Path, seen: set) -> bool:
+        return any(q == goal or (q not in seen and reaches(q, goal, seen | {q})) for q in graph.get(start, ()))
+
+    cycles = [str(p.relative_to(REPO)) for p in scripts if reaches(p, p, set())]
+    assert not cycles, f"experiment scripts in an import cycle: {cycles}"
+    assert graph[experiments / "bench_render.py"] == {experiments / "render_env_profile.py"}  # the check sees imports

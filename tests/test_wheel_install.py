@@ -65,6 +65,11 @@ def test_wheel_runs_the_main_job_smoke_from_an_empty_folder(tmp_path):
     assert Path(where).is_relative_to(site_packages), f"imported {where}, not the installed wheel"
     assert (Path(where) / "conf" / "train.yaml").is_file() and (Path(where) / "conf" / "exp" / "citywalker_rl.yaml").is_file()
 
+    scripts = {p.name for p in (venv / "bin").glob("wanderland-*")}
+    assert {"wanderland-train", "wanderland-evaluate", "wanderland-prepare"} <= scripts, scripts
+    job = _run([str(venv / "bin" / "wanderland-train"), "+exp=citywalker_rl", "--cfg", "job"], cwd=empty).stdout
+    assert "total_frames: 44800" in job, job[-2000:]  # the console script composes the packaged conf/
+
     run = _run([python, "-m", "wanderland_nav.train", "+exp=citywalker_rl", "debug=smoke"], cwd=empty)
     table = run.stdout + run.stderr
     for row in ("untrained", "BC+RL - BC"):

@@ -18,7 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose import (blind_env_config, env_factory, load_navmesh, prepared_scene, run_identity,
                                     scene_episodes, scene_gaussians, scene_identity, scene_overrides, typed_config)
-from wanderland_nav.compose.cli import hydra_output_dir
+from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
 from wanderland_nav.compose.comparison import compare_checkpoints
 from wanderland_nav.compose.evaluating import reference_policy, run_scene_set
 from wanderland_nav.compose.schema import EvaluateConfig
@@ -64,11 +64,16 @@ def run(cfg: DictConfig):
     return res
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="evaluate")
+def hydra_main(cfg: DictConfig) -> None:
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-evaluate` and `python -m wanderland_nav.evaluate`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

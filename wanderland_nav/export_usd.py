@@ -13,7 +13,7 @@ import hydra
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose import CONF_DIR, prepared_scene, scene_overrides, typed_config
 from wanderland_nav.compose.schema import ExportUsdConfig
 
 
@@ -31,11 +31,16 @@ def run(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="export_usd")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="export_usd")
+def hydra_main(cfg: DictConfig) -> None:
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-export-usd` and `python -m wanderland_nav.export_usd`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

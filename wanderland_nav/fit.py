@@ -17,7 +17,7 @@ import sys
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from wanderland_nav.compose import scene_overrides, typed_config
+from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
 from wanderland_nav.compose.fitting import fit_parts
 from wanderland_nav.compose.schema import FitRunConfig
 
@@ -38,11 +38,16 @@ def run_fit(cfg) -> dict:
     return results
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="fit")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="fit")
+def hydra_main(cfg: DictConfig) -> None:
     run_fit(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-fit` and `python -m wanderland_nav.fit`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

@@ -21,7 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 import hydra
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import scene_overrides, typed_config
+from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import process_scene, resolve_scenes
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import MakeEpisodesConfig
@@ -59,12 +59,17 @@ def run(cfg: DictConfig):
     return summaries
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="make_episodes")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="make_episodes")
+def hydra_main(cfg: DictConfig) -> None:
     if getattr(run(cfg), "failed", None):
         sys.exit(1)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-make-episodes` and `python -m wanderland_nav.make_episodes`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:], list_key="scenes")
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

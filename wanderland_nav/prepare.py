@@ -14,7 +14,7 @@ import time
 import hydra
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose import CONF_DIR, prepared_scene, scene_overrides, typed_config
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import PrepareConfig
 
@@ -57,12 +57,17 @@ def run(cfg: DictConfig):
     return rep
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="prepare")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="prepare")
+def hydra_main(cfg: DictConfig) -> None:
     if getattr(run(cfg), "failed", None):
         sys.exit(1)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-prepare` and `python -m wanderland_nav.prepare`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

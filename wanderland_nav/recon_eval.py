@@ -18,7 +18,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from wanderland_nav.compose.cli import quote_overrides
+from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
 
 
 def run(cfg: dict) -> dict:
@@ -89,14 +89,19 @@ def _hydra_output_dir() -> Path:
         return Path.cwd()
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="recon_eval")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="recon_eval")
+def hydra_main(cfg: DictConfig) -> None:
     from wanderland_nav.compose import SCHEMAS, typed_config
 
     typed_config(cfg, SCHEMAS["recon_eval"])  # a typo or a wrong type fails here, with the key named
     run(OmegaConf.to_container(cfg, resolve=True))
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-recon-eval` and `python -m wanderland_nav.recon_eval`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

@@ -5,7 +5,7 @@ in every environment on its own episodes (each a `train` run; with `study.ppo_st
 cell from that run's BC, e.g. `+study=grounding_recipe`: the learning recipe's budget), evaluates every policy in the grounded
 environment (Table-3 analogue) and the fixed grounded-trained policies in every environment (Fig.-8
 analogue), then writes `<out>/table.txt`, `fig8.png` and `meshes.rrd`. Each step is a cell of
-`compose/study_plan.py` with its own folder and hash; starting the same command again skips finished
+`grounding_study/plan.py` with its own folder and hash; starting the same command again skips finished
 cells (`<out>/done.json`). Sizes: `conf/study/grounding.yaml`; `debug=smoke` shrinks everything to minutes.
 """
 
@@ -20,11 +20,11 @@ import hydra
 import torch
 from omegaconf import DictConfig
 
-from wanderland_nav.compose.study_cells import StudyCells
+from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
 from wanderland_nav.compose.study_config import StudyConfig, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
-from wanderland_nav.compose.study_report import write_study_outputs
-from wanderland_nav.compose.cli import quote_overrides
+from wanderland_nav.grounding_study.cells import StudyCells
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
+from wanderland_nav.grounding_study.report import write_study_outputs
 from wanderland_nav.train import run as train_run
 
 
@@ -38,11 +38,6 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     cells = plan_cells(c.study)
     execute = StudyCells(c, out, train_run, cells)
     execute.check_trained_recipes(Manifest(out / MANIFEST))  # a stale policy is refused, never reused
-    if c.backfill_bc_rounds:  # per-round BC checkpoints for cells made before recipe.py kept them; runs no cell
-        from wanderland_nav.compose.study_backfill import backfill_bc_rounds
-
-        backfill_bc_rounds(execute, Manifest(out / MANIFEST), list(c.backfill_bc_rounds), out, c.backfill_max_weight_gap)
-        return {}
     # report_only: the tables of what other study processes have finished so far, running no cell
     manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}
@@ -59,13 +54,18 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="study")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="study")
+def hydra_main(cfg: DictConfig) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
                         force=True)
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-study` and `python -m wanderland_nav.study`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

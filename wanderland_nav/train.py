@@ -18,14 +18,14 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from wanderland_nav.atomic import atomic_write_text
-from wanderland_nav.compose import scene_overrides, typed_config
+from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.envs.evaluation import PolicyActor
 from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.rl.blank_camera import camera_paused
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
+from wanderland_nav.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 
@@ -77,13 +77,18 @@ def run(cfg: DictConfig) -> dict:
     return {r: results[r]["summary"]["overall"] for r in rows}
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="train")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
+def hydra_main(cfg: DictConfig) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
                         force=True)
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-train` and `python -m wanderland_nav.train`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

@@ -31,10 +31,10 @@ import torch
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.compose.cli import compose_config
-from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import study_config
-from wanderland_nav.compose.study_plan import GROUNDED, MANIFEST, Manifest, plan_cells
-from wanderland_nav.rl.report import seed_table
+from wanderland_nav.grounding_study.cells import StudyCells
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells
+from wanderland_nav.report import seed_table
 
 
 TRACKED = "BC+RL tracked"  # the phase label of the new (tracked-target) PPO's policies in the misranking grid
@@ -71,7 +71,7 @@ def _evaluate(ex: StudyCells, ckpt: Path, scene, episodes: Path, n: int, seed: i
 def _eval_routes(ex: StudyCells, env: str, seed: int, world: str, root: Path) -> Path:
     """The new-PPO BC+RL trained in `env` on the grounded test routes mapped into degraded `world`: the
     study's Fig.-8 protocol with the routes file its own cells use (`<ppo-out>/eval_routes/<world>/`)."""
-    from wanderland_nav.compose.study_routes import grounded_routes_file
+    from wanderland_nav.grounding_study.routes import grounded_routes_file
 
     result = root / "eval_routes" / world / f"{env}_seed{seed}.json"
     if result.is_file():
@@ -91,7 +91,7 @@ def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list
                root: Path) -> str:
     """The study's misranking test (same routes, Kendall tau-b per seed and mean of seeds) with the new-PPO
     policies (`<env> BC+RL tracked`): once in place of the old PPO's BC+RL, once beside them."""
-    from wanderland_nav.compose.study_cells import eval_records
+    from wanderland_nav.grounding_study.cells import eval_records
     from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
 
     s = ex.c.study

@@ -2,9 +2,9 @@
 `<out>/<step>.json` ({"step", "status", "seconds", "figures": {...}, "note"}) and `summary` prints them as
 one table.
 
-    python experiments/gpu/check.py parity  --out DIR [--device cuda] [--res 64]
-    python experiments/gpu/check.py env_fps --out DIR [--device cuda] [--batch 64 256 1024] [--res 32 64 128]
-    python experiments/gpu/check.py summary --out DIR
+    python -m experiments.gpu.check parity  --out DIR [--device cuda] [--res 64]      # from the repository root
+    python -m experiments.gpu.check env_fps --out DIR [--device cuda] [--batch 64 256 1024] [--res 32 64 128]
+    python -m experiments.gpu.check summary --out DIR
 
 `parity`: the env's observations rendered by the torch renderer and by gsplat's CUDA kernels (the same env,
 seed and poses; `render.backend=gsplat`) compared: PSNR of RGB and the largest depth difference.
@@ -26,7 +26,6 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "experiments"))
 STEPS = ("install", "pytest_gpu", "parity", "env_fps", "main_job")
 
 
@@ -89,7 +88,7 @@ def parity(args) -> None:
 
 
 def env_fps(args) -> None:
-    from bench_env import bench_one
+    from experiments.bench_env import bench_one
 
     t0 = time.perf_counter()
     scene, navmesh, gaussians = scene_parts(args.device)

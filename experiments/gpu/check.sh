@@ -41,7 +41,7 @@ else
   rc=$?
   record install "$(status_of $rc)" $((SECONDS - t)) "pip install -e .[dev,gsplat]; log: $OUT/install.log"
   "$PY" -c "import torch; assert torch.cuda.is_available(), 'torch sees no CUDA device'" || {
-    record pytest_gpu FAIL 0 "torch sees no CUDA device"; "$PY" experiments/gpu/check.py summary --out "$OUT"; exit 1; }
+    record pytest_gpu FAIL 0 "torch sees no CUDA device"; "$PY" -m experiments.gpu.check summary --out "$OUT"; exit 1; }
 fi
 
 # --- 2. pytest -m gpu (90 s)
@@ -56,10 +56,10 @@ fi
 record pytest_gpu "$(status_of $rc)" $((SECONDS - t)) "$note"
 
 # --- 3. renderer parity vs gsplat (60 s) and 4. env agent-frames/s (150 s)
-timeout 60 "$PY" experiments/gpu/check.py parity --out "$OUT" --device "$DEVICE" --res 64 \
+timeout 60 "$PY" -m experiments.gpu.check parity --out "$OUT" --device "$DEVICE" --res 64 \
   || { rc=$?; [ -f "$OUT/parity.json" ] || record parity "$(status_of $rc)" 60 "no record written"; }
 # shellcheck disable=SC2086
-timeout 150 "$PY" experiments/gpu/check.py env_fps --out "$OUT" --device "$DEVICE" --batch $BATCH --res $RES \
+timeout 150 "$PY" -m experiments.gpu.check env_fps --out "$OUT" --device "$DEVICE" --batch $BATCH --res $RES \
   --steps $STEPS || { rc=$?; [ -f "$OUT/env_fps.json" ] || record env_fps "$(status_of $rc)" 150 "no record written"; }
 
 # --- 5. a short main job on the device (120 s): BC + a few PPO iterations + the evaluations at small sizes
@@ -76,4 +76,4 @@ record main_job "$(status_of $rc)" $((SECONDS - t)) \
   "$(grep -E '^(BC\+RL|BC) ' "$OUT/main_job.log" | head -n 2 | tr -s ' ' | cut -c1-60 | paste -sd ';' -); log: $OUT/main_job.log"
 
 echo "total $((SECONDS - T0)) s"
-"$PY" experiments/gpu/check.py summary --out "$OUT"
+"$PY" -m experiments.gpu.check summary --out "$OUT"

@@ -1,8 +1,8 @@
 """Where the compiled path's time goes: CPU ms of the composite, the fused kernel's calls and its
 in-situ cost per pixel-entry evaluation, eager vs compiled, at the two operating points.
 
-  cd experiments; OMP_NUM_THREADS=1 PYTHONPATH=$PWD/.. python render/compiled_stages.py --point target
-  cd experiments; OMP_NUM_THREADS=1 PYTHONPATH=$PWD/.. python render/compiled_stages.py --point env
+  OMP_NUM_THREADS=1 python -m experiments.render.compiled_stages --point target   # from the repository root
+  OMP_NUM_THREADS=1 python -m experiments.render.compiled_stages --point env
 
 target: bench_render.py's guitar.ply resampled to 50k, 1 camera, 64x64. env: the 64 cameras of a
 seeded NavEnv reset on the tiny demo, 32x32, the 10k-Gaussian LOD. One thread; each line is one
@@ -12,22 +12,18 @@ forward call (the first compiled call includes compiling, or loading inductor's 
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import torch
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # experiments/
-
 
 def _inputs(point: str):
     if point == "env":
-        from render_env_profile import env_views
+        from experiments.render_env_profile import env_views
 
         g, V, K = env_views(64, 32, 10000)
         return (g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, V, K, 32, 32), g.sh_degree
-    from bench_render import _scene
+    from experiments.bench_render import _scene
 
     g, V, K = _scene(50000, 1, 64, "cpu")
     return (g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, V, K, 64, 64), 0

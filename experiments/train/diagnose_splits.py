@@ -27,7 +27,7 @@ from statistics import median
 
 import torch
 
-from wanderland_nav.rl.report import CAUSE_COLUMNS
+from wanderland_nav.report import CAUSE_COLUMNS
 from wanderland_nav.stats import rate_interval
 
 SPLITS = ("train", "val", "test")
@@ -120,7 +120,7 @@ def main(argv=None) -> str:
     ap.add_argument("--run", action="store_true", help="evaluate what is missing (one process at a time)")
     ap.add_argument("--seed-results", type=Path, default=None, metavar="DIR",
                     help="also write DIR/<split>/seed<i>/results.json with the policies as rows, for "
-                         "`python -m wanderland_nav.rl.report DIR/test/seed*/results.json`")
+                         "`python -m wanderland_nav.report DIR/test/seed*/results.json`")
     a = ap.parse_args(argv)
     runs: dict[str, dict[str, list[list[dict]]]] = {}
     for name, *ckpts in a.policy:

@@ -4,7 +4,7 @@
         --row BC '<runs>/layout1/bc_s*/results.json:init' \\
         --row BC+RL '<runs>/layout1/bcrl_s*/results.json:init' --out layout1.txt
 
-`python -m wanderland_nav.rl.report` needs every row in every file; an evaluation-only run
+`python -m wanderland_nav.report` needs every row in every file; an evaluation-only run
 (`train init_checkpoint=<ckpt> algo.ppo.enabled=false`) writes one row (`init`) per checkpoint, so the BC and
 BC+RL checkpoints of one seed live in two files. Each `--row NAME GLOB:ROW` names one table row, its files
 (sorted: the i-th file is seed i, the same order for every row) and the row inside them. Rows evaluated on the
@@ -20,7 +20,7 @@ import json
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
-from wanderland_nav.rl.report import TABLE_COLUMNS, seed_table, successive_pairs
+from wanderland_nav.report import TABLE_COLUMNS, seed_table, successive_pairs
 
 
 def row_records(spec: str) -> list[list[dict]]:

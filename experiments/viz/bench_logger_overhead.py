@@ -123,7 +123,8 @@ def main() -> None:
             policy = make_policy("cnn", context=2, image_size=(64, 64), feature_dim=128)
             logger = make_logger(rep)
             tr = PPOTrainer(policy, env_fn, PPOConfig(total_frames=fpb * args.iterations, frames_per_batch=fpb,
-                                               minibatch_size=fpb // 4, epochs=2), logger=logger, progress=False,
+                                               minibatch_size=fpb // 4, epochs=2, lr=1e-4, critic_warmup_iters=0,
+                                               critic_epochs=10, overlap=False), logger=logger, progress=False,
                             kinematics=cfg.kinematics)
             t0, c0 = time.perf_counter(), time.process_time()
             tr.train()

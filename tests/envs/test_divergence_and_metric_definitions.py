@@ -106,7 +106,7 @@ def test_ne_is_euclidean_distance_to_goal_is_geodesic_and_spl_lengths_are_horizo
 
 
 def test_report_table_has_both_distances():
-    from wanderland_nav.rl.report import comparison_table
+    from wanderland_nav.report import comparison_table
 
     def recs(ne, dtg):  # two episodes: Euclidean NE and geodesic distance_to_goal per episode
         return [{"episode_id": i, "navigation_error": ne + i, "distance_to_goal": dtg + i, "success": i == 0,

@@ -64,7 +64,8 @@ def test_bc_in_fake_env_beats_untrained():
     p = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
     act = lambda td: p.select_action(td)                      # noqa: E731
     before = _success_rate(env, act)
-    stats = train_bc(p, env, paths, BCConfig(rounds=2, env_steps_per_round=12, updates_per_round=80, lr=1e-3),
+    stats = train_bc(p, env, paths, BCConfig(rounds=2, env_steps_per_round=12, updates_per_round=80, lr=1e-3,
+                                                     batch_size=64),
                      progress=False)
     after = _success_rate(env, act)
     assert stats["bc/dataset"] + stats["bc/heldout_samples"] == 2 * 12 * 8   # 1 episode in 10 held out
@@ -98,7 +99,8 @@ def test_bc_stops_on_a_non_finite_loss_before_the_weights_change(monkeypatch):
 
     monkeypatch.setattr(torch.optim.AdamW, "step", step_and_snapshot)
     with pytest.raises(NonFiniteLossError, match=r"BC diverged at round 0 \(update 3 of the run\): loss=nan"):
-        train_bc(p, env, paths, BCConfig(rounds=1, env_steps_per_round=4, updates_per_round=5), progress=False)
+        train_bc(p, env, paths, BCConfig(rounds=1, env_steps_per_round=4, updates_per_round=5, batch_size=64),
+                 progress=False)
     for n, v in p.state_dict().items():
         assert torch.equal(v, snapshot[n]), n
 
@@ -111,8 +113,8 @@ def test_on_round_end_sees_each_rounds_weights_in_order():
     paths = ExpertPaths(list(env.goal_paths().numpy()))
     p = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
     seen: list[tuple[int, dict]] = []
-    train_bc(p, env, paths, BCConfig(rounds=3, env_steps_per_round=4, updates_per_round=5), progress=False,
-             on_round_end=lambda k: seen.append((k, {n: v.clone() for n, v in p.state_dict().items()})))
+    train_bc(p, env, paths, BCConfig(rounds=3, env_steps_per_round=4, updates_per_round=5, batch_size=64),
+             progress=False, on_round_end=lambda k: seen.append((k, {n: v.clone() for n, v in p.state_dict().items()})))
     assert [k for k, _ in seen] == [1, 2, 3]
     assert all(torch.equal(v, seen[-1][1][n]) for n, v in p.state_dict().items())
     changed = [n for n, v in seen[0][1].items() if v.is_floating_point() and not torch.equal(v, seen[1][1][n])]

@@ -34,7 +34,7 @@ def trainer(overlap: bool, total: int = 96, logger=None) -> PPOTrainer:
     torch.manual_seed(0)
     policy = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
     cfg = PPOConfig(total_frames=total, frames_per_batch=32, minibatch_size=16, epochs=2, lr=1e-3, target_kl=None,
-                    overlap=overlap)
+                    overlap=overlap, critic_warmup_iters=0, critic_epochs=10)
     return PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=logger or ListLogger(), progress=False,
                       kinematics=KinematicsConfig())
 

@@ -36,7 +36,8 @@ def tiny_policy():
 
 
 def trainer(policy, tmp_path, total, logger=None, **kw):
-    cfg = PPOConfig(total_frames=total, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4, **kw)
+    cfg = PPOConfig(**{"total_frames": total, "frames_per_batch": 32, "minibatch_size": 16, "epochs": 2, "lr": 3e-4,
+                       "critic_warmup_iters": 0, "critic_epochs": 10, "overlap": False, **kw})
     return PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=logger or ListLogger(),
                       checkpointer=Checkpointer(tmp_path / "ckpt"), progress=False, kinematics=KinematicsConfig())
 
@@ -95,7 +96,8 @@ def test_only_trainable_parameters_move(tmp_path):
 def test_ppo_learns_fake_point_goal(tmp_path):
     p = tiny_policy()
     log = ListLogger()
-    cfg = PPOConfig(total_frames=4800, frames_per_batch=240, minibatch_size=60, epochs=4, lr=3e-4)
+    cfg = PPOConfig(total_frames=4800, frames_per_batch=240, minibatch_size=60, epochs=4, lr=3e-4,
+                    critic_warmup_iters=0, critic_epochs=10, overlap=False)
     PPOTrainer(p, lambda: FakeNavEnv((8,)), cfg, logger=log, progress=False, kinematics=KinematicsConfig()).train()
     early = sum(r["train/reward_mean"] for _, r in log.rows[:3]) / 3
     late = sum(r["train/reward_mean"] for _, r in log.rows[-3:]) / 3
@@ -132,7 +134,7 @@ def test_ppo_learns_fast_critic_and_policy(tmp_path, overlap, seed):
     before = _greedy_return(p)
     log = ListLogger()
     cfg = PPOConfig(total_frames=768, frames_per_batch=128, minibatch_size=32, epochs=4, lr=1e-3, critic_lr=1e-2,
-                    target_kl=None, critic_epochs=4, anneal_lr=False, overlap=overlap)
+                    target_kl=None, critic_epochs=4, anneal_lr=False, overlap=overlap, critic_warmup_iters=0)
     PPOTrainer(p, lambda: FakeNavEnv((16,), seed=seed), cfg, logger=log, progress=False, seed=seed,
                kinematics=KinematicsConfig()).train()
     ev = [r["losses/explained_variance"] for _, r in log.rows]
@@ -150,7 +152,8 @@ def _fake_env_fn():
 def test_multi_sync_collector_two_workers(tmp_path):
     """collector=multi: two worker processes, one env each, batches gathered synchronously."""
     log = ListLogger()
-    cfg = PPOConfig(total_frames=64, frames_per_batch=32, minibatch_size=16, epochs=1)
+    cfg = PPOConfig(total_frames=64, frames_per_batch=32, minibatch_size=16, epochs=1, lr=1e-4,
+                    critic_warmup_iters=0, critic_epochs=10, overlap=False)
     t = PPOTrainer(tiny_policy(), _fake_env_fn, cfg, logger=log, num_workers=2, progress=False,
                    kinematics=KinematicsConfig())
     t.train()
@@ -231,7 +234,8 @@ def test_non_finite_loss_stops_with_iteration_and_term_and_keeps_last_checkpoint
     from wanderland_nav.errors import NonFiniteLossError
 
     p = tiny_policy()
-    cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4)
+    cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=2, lr=3e-4,
+                    critic_warmup_iters=0, critic_epochs=10, overlap=False)
     ck = Checkpointer(tmp_path / "ckpt")
     t = PPOTrainer(p, lambda: NaNRewardEnv((4,)), cfg, logger=ListLogger(), checkpointer=ck, progress=False,
                    kinematics=KinematicsConfig())

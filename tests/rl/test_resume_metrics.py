@@ -29,7 +29,8 @@ def _recipe(run_dir, logger):
     torch.manual_seed(0)
     return Recipe(policy=make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32), eval_env=None,
                   env_fn=lambda: FakeNavEnv((4,)), nav_from_scene=None, bc=None,
-                  ppo=PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1),
+                  ppo=PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1, lr=1e-4,
+                                critic_warmup_iters=0, critic_epochs=10, overlap=False),
                   evaluate=_evaluate, logger=logger, run_dir=run_dir, config={}, identity={"hash": "h" * 64},
                   progress=False, kinematics=KinematicsConfig())
 

@@ -47,7 +47,7 @@ def make_trainer(freeze: str, plain: bool) -> PPOTrainer:
         policy.frame_features = types.MethodType(plain_frame_features, policy)
         policy.reuse_frame_features = lambda *rgb: nullcontext()
     cfg = PPOConfig(total_frames=B * T, frames_per_batch=B * T, minibatch_size=8, epochs=2, lr=1e-3,
-                    target_kl=None, critic_epochs=2)
+                    target_kl=None, critic_epochs=2, critic_warmup_iters=0, overlap=False)
     return PPOTrainer(policy, lambda: FakeNavEnv((B,), context=C, size=S), cfg, logger=NullLogger(),
                       progress=False, kinematics=KinematicsConfig())
 

@@ -53,7 +53,8 @@ def test_two_ray_workers_run_ppo_iterations(tmp_path):
         log = ListLogger()
         policy = tiny_policy()
         before = [p.detach().clone() for p in policy.parameters()]
-        cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1)
+        cfg = PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1, lr=1e-4,
+                        critic_warmup_iters=0, critic_epochs=10, overlap=False)
         t = PPOTrainer(policy, lambda: FakeNavEnv((4,)), cfg, logger=log, checkpointer=Checkpointer(tmp_path),
                        num_workers=2, progress=False, ray={"address": None, "cpus_per_worker": 1},
                        kinematics=KinematicsConfig())

@@ -14,6 +14,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the package's link to the repository's conf/, shipped in the wheel
@@ -82,17 +85,27 @@ def scene_overrides(argv: list[str], *, list_key: str | None = None, conf_dir: P
 
 
 def compose_config(name: str, overrides: list[str] = (), *, list_key: str | None = None):
-    """Hydra's composition of `conf/<name>.yaml` without its runtime (tests, notebooks)."""
-    from hydra import compose, initialize_config_dir
+    """Hydra's composition of `conf/<name>.yaml` without its runtime (tests, notebooks), also from within a
+    running `@hydra.main` (the study composes a `train` run per cell): that app's global state is set aside
+    for the call and restored after."""
+    outer = GlobalHydra.instance().hydra if GlobalHydra.instance().is_initialized() else None
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose(config_name=name, overrides=scene_overrides(list(overrides), list_key=list_key))
+    finally:
+        GlobalHydra.instance().clear()
+        if outer is not None:
+            GlobalHydra.instance().initialize(outer)
 
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return compose(config_name=name, overrides=scene_overrides(list(overrides), list_key=list_key))
+
+def resolved(cfg) -> dict:
+    """A composed config as plain, resolved containers: what `config.yaml` records and run identities hash."""
+    return OmegaConf.to_container(cfg, resolve=True)
 
 
 def hydra_output_dir() -> Path:
     """Hydra's run folder, or the current folder when composed without Hydra's runtime (tests)."""
-    from hydra.core.hydra_config import HydraConfig
-
     try:
         return Path(HydraConfig.get().runtime.output_dir)
     except ValueError:

@@ -13,7 +13,7 @@ from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, sc
 from wanderland_nav.compose.scene_sets import scene_env_fn
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
-from wanderland_nav.rl.report import comparison_table
+from wanderland_nav.report import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 

@@ -8,6 +8,8 @@ are, so there is no second, hand-written copy of their fields. `typed_config` is
 conversion; OmegaConf checks keys and types, `at_least` / `above` on this module's fields check ranges
 naming the full key (`train_env.batch_size=0: must be >= 1`), and the library dataclasses' own
 `__post_init__` checks theirs (the error then names the config key of the class that refused).
+The defaults equal the values each entry point's base YAML sets (conf/README.md, "Where a default
+lives"; tests/test_config_defaults.py).
 
 The `policy` node stays a plain mapping: each architecture has its own fields and
 `policies.make_policy` rejects unknown ones with the field named.
@@ -24,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from planners import NavMeshSettings
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
+from wanderland_nav.envs.config import CameraConfig, NavEnvConfig, TerminationConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.gsfit.trainer import FitConfig
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
@@ -86,7 +88,7 @@ class SceneGroup:
 
     name: str = "demo"
     path: str = "data/scenes/demo"
-    demo: bool = False
+    demo: bool = True  # the procedural demo (`conf/scene/demo.yaml`); a folder sets false
     seed: int = 0  # demo only
     preset: str = "default"  # demo only: "tiny" | "default"
     up_axis: Optional[str] = None  # null: the scene's own (scene_meta.json, else its layout's convention)
@@ -192,19 +194,24 @@ class TrainEnvSettings:
 
 @dataclass
 class EvalSettings:
-    split: Optional[str] = "val"
+    split: Optional[str] = "test"
     episodes: Optional[int] = at_least(1, None)
-    batch_size: int = at_least(1, 10)
+    batch_size: int = at_least(1, 25)
     deterministic: bool = True
-    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; rl/report.SAMPLED)
-    blank_camera_rows: bool = False  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
+    sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; report.SAMPLED)
+    blank_camera_rows: bool = True  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
+
+
+def train_env_config() -> NavEnvConfig:
+    """`train.yaml`'s `env`: episodes of at most 100 steps, interventions sooner than the env's defaults."""
+    return NavEnvConfig(termination=TerminationConfig(max_steps=100, no_progress_steps=30, stuck_steps=10))
 
 
 @dataclass
 class TrainConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    env: NavEnvConfig = field(default_factory=train_env_config)
     policy: Dict[str, Any] = field(default_factory=dict)
     algo: AlgoGroup = field(default_factory=AlgoGroup)
     collector: CollectorGroup = field(default_factory=CollectorGroup)
@@ -360,13 +367,18 @@ class MakeEnvEpisodes:
     goal_images: bool = False
 
 
+def policy_facing_env_config() -> NavEnvConfig:
+    """`make_env.yaml`'s `env`: observations without ground truth, episode metrics and video pixels."""
+    return NavEnvConfig(privileged=False, episode_metrics=True, finished_records=False, pixels=True)
+
+
 @dataclass
 class MakeEnvConfig:
     """`conf/make_env.yaml`: `wanderland_nav.make_env`, one TorchRL env from Python."""
 
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    env: NavEnvConfig = field(default_factory=policy_facing_env_config)
     batch_size: int = 1
     device: str = "cpu"
     seed: int = 0

@@ -43,7 +43,7 @@ class StudyGroup:
     fixed_policies: List[str] = field(default_factory=lambda: list(POLICY_PHASES))  # grounded-trained, Fig.-8 rows
     table3_phases: List[str] = field(default_factory=lambda: ["BC", "BC+RL"])  # degraded-trained rows of Table 3
     # Fig. 8 in a degraded env: "own" = its own test episodes; "grounded_routes" = the grounded test episodes
-    # mapped into its frame (the paper's protocol, `compose/study_routes.py`); the grounded env has one set
+    # mapped into its frame (the paper's protocol, `grounding_study/routes.py`); the grounded env has one set
     protocols: List[str] = field(default_factory=lambda: list(PROTOCOLS))
     ranked_phases: List[str] = field(default_factory=lambda: ["BC+RL"])  # degraded-trained policies added to the
     # Fig.-8 ranking (evaluated on the grounded routes in every env), so Kendall tau has more than 3 policies
@@ -81,8 +81,6 @@ class StudyConfig:
     out: str = "outputs/study/grounding"  # cells, done-manifest, table.txt, chart and recording
     threads: Optional[int] = None  # torch intra-op threads for every cell
     report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
-    backfill_bc_rounds: Optional[List[str]] = None  # envs whose done train cells get bc_round<k>.pt (study_backfill)
-    backfill_max_weight_gap: float = 0.0  # 0: only a bit-equal re-run of the cell's BC is copied (study_backfill)
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
 

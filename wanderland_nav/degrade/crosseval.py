@@ -1,10 +1,10 @@
 """Cross-evaluation tables of the grounding study: the paper's Table 3 and Fig. 8 analogues.
 
-Input is per-episode records keyed `(eval env, seed, trained-in env, phase)` (`compose.study_cells`).
+Input is per-episode records keyed `(eval env, seed, trained-in env, phase)` (`grounding_study.cells`).
 
 * Table 3: every policy (untrained; BC and BC+RL trained in each environment) evaluated in the GROUNDED
   environment on its test split, with paired differences vs the grounded-trained BC+RL policy and vs
-  the untrained one (same episodes and seeds: `rl.report.seed_table`).
+  the untrained one (same episodes and seeds: `report.seed_table`).
 * Fig. 8: the same fixed, grounded-trained policies evaluated in every environment, each on its own
   test split. Does a degraded environment change SR / IR and the ranking? Ranking agreement is
   Kendall's tau-b between the policies' scores in the grounded and in the degraded environment, with a
@@ -20,7 +20,7 @@ from typing import Mapping, Sequence
 
 import torch
 
-from wanderland_nav.rl.report import FIELDS, estimate, seed_table
+from wanderland_nav.report import FIELDS, estimate, seed_table
 from wanderland_nav.stats import Estimate
 
 GROUNDED = "grounded"

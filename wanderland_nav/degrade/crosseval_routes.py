@@ -1,7 +1,7 @@
 """The Fig.-8 analogue on the SAME routes in both worlds (the paper's protocol).
 
 Input: per-episode records keyed `(eval env, seed, trained-in env, phase)` where every degraded env
-was evaluated on the grounded test routes mapped into its frame (`compose/study_routes.py`; mapped
+was evaluated on the grounded test routes mapped into its frame (`grounding_study/routes.py`; mapped
 episodes keep the grounded `episode_id`, dropped routes are absent). The grounded records are cut to
 the routes a degraded env kept, in its order, so every comparison is PAIRED over the same routes and
 seeds: the change of SR / IR per policy is a paired bootstrap difference, and Kendall's tau-b between
@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 
 import torch
 
-from wanderland_nav.rl.report import estimate
+from wanderland_nav.report import estimate
 from wanderland_nav.stats import Estimate, paired_difference
 
 from .crosseval import GROUNDED, kendall_tau_b, policy_label, ranking_text, scores_of

@@ -18,6 +18,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics
+from wanderland_nav.report import comparison_table
 
 
 @dataclass
@@ -81,8 +82,6 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
 
 def interval_table(records: list[dict], name: str) -> str:
     """NE / SR / SPL / IR with 95 % intervals for all episodes and for each indoor / outdoor group present."""
-    from wanderland_nav.rl.report import comparison_table
-
     rows = {f"{name}/overall": records}
     for group in ("indoor", "outdoor"):
         sub = [r for r in records if r.get("environment") == group]

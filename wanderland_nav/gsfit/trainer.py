@@ -76,7 +76,7 @@ class FitConfig:
     seed: int = 0
     device: str = "cpu"
     downscale: float = 1.0  # image resolution divisor (CPU-friendly training)
-    max_width: int | None = None  # optional cap on the training width (pixels)
+    max_width: int | None = 128  # cap on the training width (pixels); None: full resolution
     holdout_every: int = 8  # every k-th train camera is held out as an interpolation view
     cameras_per_step: int = 1
     sh_increase_every: int = 1000

@@ -108,10 +108,12 @@ class _MixedActor(TensorDictModuleBase):
 
 @dataclass
 class BCConfig:
-    rounds: int = 3                # 1 expert round + (rounds - 1) DAgger rounds
+    """Behaviour-cloning sizes; the defaults are the main job's (`conf/algo/ppo.yaml` `bc:`)."""
+
+    rounds: int = 4                # 1 expert round + (rounds - 1) DAgger rounds
     env_steps_per_round: int = 60  # env.step calls per round (each gives batch_size samples)
-    updates_per_round: int = 300
-    batch_size: int = 64
+    updates_per_round: int = 400
+    batch_size: int = 32
     lr: float = 3e-4
     weight_decay: float = 1e-4
     expert_noise: float = 0.3      # metres of waypoint noise in the expert round

@@ -3,7 +3,7 @@
 Why: the policies read the camera beside the route (or goal) and their own past positions; a policy can
 score well while ignoring its images. Evaluating it a second time with every camera frame black, on the
 same episodes, and pairing the two runs per episode says how much of its success the camera carries.
-The row is named `<row>` + `rl.report.BLANK_CAMERA` ("BC+RL blank camera").
+The row is named `<row>` + `report.BLANK_CAMERA` ("BC+RL blank camera").
 """
 
 from __future__ import annotations

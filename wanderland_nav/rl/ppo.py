@@ -57,11 +57,14 @@ IS_WEIGHT = "importance_weight"
 
 @dataclass
 class PPOConfig:
-    total_frames: int = 12_000         # env steps summed over the batch
-    frames_per_batch: int = 400        # per collector iteration
+    """PPO sizes and rates; the defaults are the main job's (`conf/algo/ppo.yaml`, equal by
+    tests/test_config_defaults.py)."""
+
+    total_frames: int = 44_800         # env steps summed over the batch (the main job's 56 iterations)
+    frames_per_batch: int = 800        # per collector iteration (8 agents x 100 steps)
     epochs: int = 4
-    minibatch_size: int = 100
-    lr: float = 1e-4                   # policy (actor) learning rate
+    minibatch_size: int = 200
+    lr: float = 5e-5                   # policy (actor) learning rate
     critic_lr: float = 1e-3            # value head: a fresh critic must catch up with a pretrained actor
     gamma: float = 0.99                # the paper's
     lmbda: float = 0.95
@@ -70,8 +73,8 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
-    critic_warmup_iters: int = 0       # first iterations update only the critic (see PPOTrainer.update)
-    critic_epochs: int = 10            # passes of the critic over each batch (cached inputs: cheap)
+    critic_warmup_iters: int = 2       # first iterations update only the critic (see PPOTrainer.update)
+    critic_epochs: int = 8             # passes of the critic over each batch (cached inputs: cheap)
     critic_hidden: int = 256
     critic_horizon: float = 100.0      # the critic's clock input is step_count / this (a scale, not a limit)
     anneal_lr: bool = True             # actor lr: linear to 0 over total_frames
@@ -80,7 +83,7 @@ class PPOConfig:
     std_lr: float | None = None        # the exploration std's own Adam lr; None: the actor's `lr`
     action_dist: str = "tracked"       # "tracked": Normal over the executed (tracked) waypoint, 2 dims
                                        #   (rl/tracked_target.py); "waypoints": Normal over all K*2 coordinates
-    overlap: bool = False              # collect the next batch while updating (rl/overlap.py): one iteration
+    overlap: bool = True               # collect the next batch while updating (rl/overlap.py): one iteration
                                        #   stale, corrected by the decoupled objective; one process, 2 threads
 
     @property

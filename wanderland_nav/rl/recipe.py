@@ -20,7 +20,7 @@ from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.blank_camera import BlankCamera
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
-from wanderland_nav.rl.report import BLANK_CAMERA, SAMPLED
+from wanderland_nav.report import BLANK_CAMERA, SAMPLED
 from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")

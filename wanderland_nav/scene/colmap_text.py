@@ -1,10 +1,7 @@
 """COLMAP text-format (`.txt`) readers and writers: `cameras.txt`, `images.txt`, `points3D.txt`.
 
-Split out of `scene.colmap` to keep each module small; `scene.colmap` re-exports every
-name here, so `from wanderland_nav.scene.colmap import read_cameras_txt` and `C.read_images_txt` keep
-working. This module depends on `scene.colmap` for the data classes and `ColmapFormatError`;
-`scene.colmap` imports this one lazily (never at import time), so either can be imported first.
-Formats and error contract are those documented in `scene.colmap`.
+The data classes come from `scene.colmap_types`; `scene.colmap` (the binary format and whole models)
+re-exports the readers and writers here. Formats and error contract are those documented in `scene.colmap`.
 """
 
 from __future__ import annotations
@@ -14,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
-from wanderland_nav.scene.colmap import (
+from wanderland_nav.scene.colmap_types import (
     ColmapCamera,
     ColmapFormatError,
     ColmapImage,

@@ -8,7 +8,7 @@ not distinguishable from noise and a percentage would overstate it).
 
 `seed_table` does the same for several training seeds evaluated on the same episodes (`-m seed=0,1,2`):
 mean over seeds x episodes with a two-level bootstrap, and the IQM where asked.
-CLI: `python -m wanderland_nav.rl.report multirun/citywalker_rl/*/results.json` (one `results.json` per seed).
+CLI: `python -m wanderland_nav.report multirun/citywalker_rl/*/results.json` (one `results.json` per seed).
 """
 
 from __future__ import annotations
@@ -195,7 +195,7 @@ def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
 
 
 def main(argv: Sequence[str] | None = None) -> str:
-    """`python -m wanderland_nav.rl.report results.json ... [--baseline BC]`: the multi-seed table."""
+    """`python -m wanderland_nav.report results.json ... [--baseline BC]`: the multi-seed table."""
     import argparse
 
     ap = argparse.ArgumentParser(description=main.__doc__)

@@ -10,10 +10,12 @@ from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, process_alive, cell_digests
-from wanderland_nav.compose.study_cells import eval_records
 from wanderland_nav.degrade.crosseval import fig8, table3
 from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
+from wanderland_nav.grounding_study.cells import eval_records
+from wanderland_nav.grounding_study.plan import GROUNDED, Cell, Manifest, process_alive, cell_digests
+from wanderland_nav.viz.rerun_side_by_side import write_side_by_side
+from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -51,9 +53,6 @@ def _training_line(c: Cell, e: dict) -> str:
 def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: Manifest, meshes: dict[str, Path],
                         header: str) -> dict[str, Path]:
     """Write table.txt, fig8.png (when any Fig.-8 estimate exists) and meshes.rrd; -> what was written."""
-    from wanderland_nav.viz.rerun_side_by_side import write_side_by_side
-    from wanderland_nav.viz.study_chart import write_study_chart
-
     s = c.study
     digests = cell_digests(c, cells)
     records = eval_records(manifest, cells, digests)

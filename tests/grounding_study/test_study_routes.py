@@ -9,7 +9,7 @@ import torch
 import trimesh
 
 from planners import NavMesh, NavMeshSettings
-from wanderland_nav.compose.study_routes import DROP_REASONS, map_routes
+from wanderland_nav.grounding_study.routes import DROP_REASONS, map_routes
 from wanderland_nav.degrade.poses import PoseCorrection
 from wanderland_nav.episodes.schema import Episode, Goal, rotation_from_yaw
 

@@ -1,4 +1,4 @@
-"""What each study cell does (`study_plan.Cell`): build a degraded scene, save the untrained policy,
+"""What each study cell does (`plan.Cell`): build a degraded scene, save the untrained policy,
 run one `train` run, evaluate one checkpoint on one environment's test split.
 
 Every environment is an ordinary scene folder: the grounded source, or a degraded copy written by
@@ -9,17 +9,31 @@ every run and evaluation in an environment uses that environment's episodes file
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 from pathlib import Path
 from typing import Callable, Sequence
 
 import torch
-from omegaconf import OmegaConf
+import yaml
 
+from planners import NavMesh
 from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.compose.build import load_navmesh, make_policy_from_config
+from wanderland_nav.compose.cli import compose_config, resolved
+from wanderland_nav.compose.comparison import compare_checkpoints
+from wanderland_nav.compose.episode_file import episodes_for_run, split_counts
+from wanderland_nav.compose.identity import dotted_diff, identity_config
+from wanderland_nav.compose.scene import prepared_scene, scene_folder
+from wanderland_nav.compose.schema import SceneGroup, TrainConfig, typed_config
 from wanderland_nav.compose.study_config import BC_ROUND, PROTOCOLS, StudyConfig
-from wanderland_nav.compose.study_plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.degrade import build_degraded_scene, preset
+from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+from wanderland_nav.episodes.sampler import SamplerSettings
+from wanderland_nav.grounding_study.plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.grounding_study.routes import grounded_routes_file
+from wanderland_nav.rl.checkpoint import save_checkpoint
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -33,25 +47,8 @@ def phase_checkpoint(phase: str) -> str:
     return f"checkpoints/bc_round{k.group(1)}.pt" if k else CHECKPOINTS[phase]
 
 
-def _compose_inside_hydra(name: str, overrides: list[str]):
-    """`compose_config` also from within a running `@hydra.main` (the study's own), whose global state
-    is set aside for the call and restored after."""
-    from hydra.core.global_hydra import GlobalHydra
-
-    from wanderland_nav.compose.cli import compose_config
-
-    outer = GlobalHydra.instance().hydra if GlobalHydra.instance().is_initialized() else None
-    GlobalHydra.instance().clear()
-    try:
-        return compose_config(name, overrides)
-    finally:
-        GlobalHydra.instance().clear()
-        if outer is not None:
-            GlobalHydra.instance().initialize(outer)
-
-
 class StudyCells:
-    """`execute(cell, folder) -> info` for `study_plan.run_cells`. `train_fn(cfg) -> rows` runs one
+    """`execute(cell, folder) -> info` for `plan.run_cells`. `train_fn(cfg) -> rows` runs one
     composed `train` config (the `train` entry point's `run`), so a cell is exactly that command."""
 
     def __init__(self, c: StudyConfig, out: Path, train_fn: Callable, cells: list[Cell]):
@@ -63,9 +60,6 @@ class StudyCells:
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
-        from wanderland_nav.compose.schema import SceneGroup
-        from wanderland_nav.compose.scene import scene_folder
-
         s = self.c.source
         return scene_folder(SceneGroup(name="source", path=s.path, demo=s.demo, seed=s.demo_seed,
                                        preset=s.demo_preset)).resolve()
@@ -87,7 +81,7 @@ class StudyCells:
         extra += [f"episodes.path={own}", "episodes.num=null"] if own is not None else []
         extra += [f"threads={self.c.threads}"] if self.c.threads else []
         extra += [f"run_dir={run_dir}"] if run_dir is not None else []
-        return _compose_inside_hydra("train", [*self.c.study.train, *extra])
+        return compose_config("train", [*self.c.study.train, *extra])
 
     def study_episodes_file(self, env: str) -> Path | None:
         """With `study.episode_sampler`: `env`'s episodes generated on its own navmesh with those sampler
@@ -97,14 +91,6 @@ class StudyCells:
         if not overrides:
             return None
         if env not in self._study_episodes:
-            import hashlib
-
-            from planners import NavMesh
-            from wanderland_nav.compose.scene import prepared_scene
-            from wanderland_nav.compose.schema import TrainConfig, typed_config
-            from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-            from wanderland_nav.episodes.sampler import SamplerSettings
-
             t = typed_config(self.train_config(env, 0, study_episodes=False), TrainConfig)
             scene = prepared_scene(t.scene, t.navigation)
             settings = GeneratorSettings(sampler=SamplerSettings(**overrides), splits=tuple(t.episodes.splits),
@@ -142,10 +128,6 @@ class StudyCells:
         return self._envs[env, seed]
 
     def _load_env_episodes(self, env: str, seed: int):
-        from wanderland_nav.compose.episode_file import episodes_for_run
-        from wanderland_nav.compose.scene import prepared_scene
-        from wanderland_nav.compose.schema import TrainConfig, typed_config
-
         t = typed_config(self.train_config(env, seed), TrainConfig)
         scene = prepared_scene(t.scene, t.navigation)
         if t.episodes.path is not None:  # study.episode_sampler's file, used as it is (as `train` does)
@@ -163,17 +145,13 @@ class StudyCells:
         would otherwise reuse the old policies silently. Paths inside the study are compared as the study's own
         (`_portable`), so a copied study still matches; `study.accept_recipe_changes` names the keys a user has
         checked do not matter (listed in the table)."""
-        import yaml
-
-        from wanderland_nav.compose.identity import dotted_diff
-
         accepted = tuple(self.c.study.accept_recipe_changes)
         for key, cell in self.cells.items():
             folder = self.cell_dir(key)
             if cell.kind not in ("train", "ppo") or manifest.status(key, self.digests[key]) != "done":
                 continue
             recorded = yaml.safe_load((folder / "config.yaml").read_text())
-            now = OmegaConf.to_container(self.cell_train_config(cell, folder), resolve=True)
+            now = resolved(self.cell_train_config(cell, folder))
             diff = dotted_diff(_portable(recorded), _portable(now), skip=accepted)
             if diff:
                 raise RuntimeError(f"{folder}: cell {key} was trained with another recipe than study.train composes "
@@ -191,8 +169,6 @@ class StudyCells:
         return run[cell.kind](cell, folder)
 
     def _build(self, cell: Cell, folder: Path) -> dict:
-        from wanderland_nav.degrade import build_degraded_scene, preset
-
         path = build_degraded_scene(self.source(), self.env_path(cell.env), preset(cell.env, cell.seed),
                                     device=self.c.device)
         meta = json.loads((path / "scene_meta.json").read_text())["degradation"]
@@ -200,11 +176,8 @@ class StudyCells:
 
     def _init(self, cell: Cell, folder: Path) -> dict:
         """The untrained policy of seed s: `train`'s policy config, initialised after `torch.manual_seed(s)`."""
-        from wanderland_nav.compose.build import make_policy_from_config
-        from wanderland_nav.rl.checkpoint import save_checkpoint
-
         cfg = self.train_config(GROUNDED, cell.seed)
-        conf = OmegaConf.to_container(cfg, resolve=True)
+        conf = resolved(cfg)
         torch.manual_seed(cell.seed)
         policy = make_policy_from_config(conf["policy"], self.c.device)
         save_checkpoint(folder / CHECKPOINTS["untrained"], policy=policy, optimizer=None, counters={}, config=conf,
@@ -214,9 +187,6 @@ class StudyCells:
     def _train(self, cell: Cell, folder: Path) -> dict:
         """One `train` run in the cell's env: BC then PPO (a train cell), or PPO alone from the train cell's
         BC checkpoint (a ppo cell, `study.ppo_stage`)."""
-        from wanderland_nav.compose.episode_file import split_counts
-        from wanderland_nav.compose.schema import TrainConfig, typed_config
-
         _, episodes, t = self.env_episodes(cell.env, cell.seed)  # made here so a too-broken navmesh fails clearly
         counts = split_counts(episodes)
         asked = self.episodes_asked(cell.env, t.episodes.num)
@@ -233,20 +203,14 @@ class StudyCells:
                 "rows": {k: {m: v[m] for m in ("SR", "IR", "NE", "SPL") if m in v} for k, v in rows.items()}}
 
     def _eval(self, cell: Cell, folder: Path) -> dict:
-        from wanderland_nav.compose.build import load_navmesh
-        from wanderland_nav.compose.comparison import compare_checkpoints
-
         s = self.c.study
         ckpt = self.cell_dir(self.needs_producer(cell)) / phase_checkpoint(cell.policy[1])
-        if not ckpt.is_file():  # e.g. a train cell finished before recipe.py kept a checkpoint per BC round
-            raise FileNotFoundError(f"{ckpt}: the {cell.policy[1]} checkpoint of {self.needs_producer(cell)} is missing "
-                                    "(a train cell made before per-round BC checkpoints? "
-                                    "python -m wanderland_nav.compose.study_backfill re-creates them)")
+        if not ckpt.is_file():  # a train cell never deletes its checkpoints: its folder was changed by hand
+            raise FileNotFoundError(f"{ckpt}: the {cell.policy[1]} checkpoint of {self.needs_producer(cell)} is missing; "
+                                    "delete that cell's folder to train it again")
         scene, episodes, _ = self.env_episodes(cell.env, cell.seed)
         routes = {}
         if cell.protocol == "grounded_routes":  # the grounded test routes mapped into this env (counted drops)
-            from wanderland_nav.compose.study_routes import grounded_routes_file
-
             grounded = self.env_episodes(GROUNDED, cell.seed)[1]
             episodes, routes = grounded_routes_file(grounded, s.eval_split, s.eval_episodes, scene, self.out / "routes")
             n = routes["kept"]
@@ -267,15 +231,13 @@ class StudyCells:
         return {**info, "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}} if routes else info
 
     def needs_producer(self, cell: Cell) -> str:
-        return cell.needs[0]  # study_plan._eval puts the policy's producer first
+        return cell.needs[0]  # plan._eval puts the policy's producer first
 
 
 def _portable(config: dict) -> dict:
     """A train / ppo cell's identity config without what is the cell's own: scene path, seed, threads, the
     ppo cell's init_checkpoint (its train cell's bc.pt, whose hash is in the ppo cell's) and the folder of a
     `study.episode_sampler` episodes file (its name carries the generator's settings hash, kept)."""
-    from wanderland_nav.compose.identity import identity_config
-
     out = {k: v for k, v in identity_config(config).items() if k not in ("scene", "seed", "threads", "init_checkpoint")}
     if (out.get("episodes") or {}).get("path"):
         out["episodes"] = {**out["episodes"], "path": Path(out["episodes"]["path"]).name}
@@ -285,8 +247,6 @@ def _portable(config: dict) -> dict:
 def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
     """`wanted` episodes of `split`, or all it has when fewer (logged): a broken navmesh yields fewer
     episodes, and evaluating one twice would count it twice."""
-    from wanderland_nav.compose.episode_file import split_counts
-
     have = split_counts(episodes).get(split, 0)
     if have < 1:
         raise RuntimeError(f"{episodes}: no {split!r} episodes on this navmesh; nothing to evaluate")

@@ -25,6 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from planners import NavMesh
+from wanderland_nav.degrade.build import CORRECTION
+from wanderland_nav.degrade.poses import PoseCorrection
+from wanderland_nav.episodes.paths import first_heading_nav, polyline_length, resample_polyline
+from wanderland_nav.episodes.schema import Episode, Goal, load_episodes, rotation_from_yaw, save_episodes
+
 #: why a grounded route is not evaluated in a degraded world (counted, in this order of checks)
 DROP_REASONS = ("start off the navmesh", "goal off the navmesh", "goal unreachable")
 
@@ -49,17 +55,12 @@ class MappedRoutes:
 
 def _route_start_yaw(corners_scene: np.ndarray, R_ns: np.ndarray) -> float:
     """Nav-frame heading of the first segment of a mapped route `[K,3]` (scene frame)."""
-    from wanderland_nav.episodes.paths import first_heading_nav
-
     return float(first_heading_nav(np.asarray(corners_scene, dtype=np.float64) @ R_ns.T))
 
 
 def _mapped_episode(ep, path_points: np.ndarray, mapped_corners: np.ndarray, navmesh, R_ns: np.ndarray,
                     up_axis: str, step_size: float):
     """One grounded `Episode` rebuilt on the degraded navmesh's shortest path `path_points [P,3]`."""
-    from wanderland_nav.episodes.paths import polyline_length, resample_polyline
-    from wanderland_nav.episodes.schema import Episode, Goal, rotation_from_yaw
-
     dense = resample_polyline(path_points @ R_ns.T, step_size, horizontal=True) @ R_ns  # [L,3] scene frame
     dense = np.asarray(navmesh.snap_point(dense, max_distance=1e9), dtype=np.float64)
     extras = {k: v for k, v in ep.extras.items() if k not in ("goal_image", "island", "point_goal_polar")}
@@ -104,11 +105,6 @@ def grounded_routes_file(grounded_episodes: Path, split: str, num: int | None, d
     """The first `num` grounded `split` episodes mapped into `degraded_scene` (prepared), written once to
     `out_dir/routes_<env>_<hash8>.json` (atomic; the hash covers the grounded file, split, num and the
     degraded navmesh) -> (path, counts); `counts["kept"]` may be 0 (every route infeasible there)."""
-    from planners import NavMesh
-    from wanderland_nav.degrade.build import CORRECTION
-    from wanderland_nav.degrade.poses import PoseCorrection
-    from wanderland_nav.episodes.schema import load_episodes, save_episodes
-
     root = Path(degraded_scene.root)
     key = hashlib.sha256(json.dumps([hashlib.sha256(Path(grounded_episodes).read_bytes()).hexdigest(), split, num,
                                      hashlib.sha256(Path(degraded_scene.navmesh_path).read_bytes()).hexdigest()])

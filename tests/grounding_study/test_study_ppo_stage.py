@@ -13,11 +13,11 @@ import pytest
 import yaml
 from omegaconf import OmegaConf
 
-from wanderland_nav.compose.study_cells import StudyCells
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, plan_cells
-from wanderland_nav.compose.study_report import cell_status_lines
 from wanderland_nav.degrade.crosseval import table3
+from wanderland_nav.grounding_study.cells import StudyCells
+from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, plan_cells
+from wanderland_nav.grounding_study.report import cell_status_lines
 
 STAGE = ["algo.ppo.total_frames=1600", "algo.ppo.frames_per_batch=400", "algo.ppo.critic_warmup_iters=1"]
 
@@ -81,7 +81,7 @@ def test_ppo_cell_runs_train_from_the_bc_checkpoint_and_its_recipe_is_checked(tm
     ran = []
     episodes = tmp_path / "episodes.json"
     monkeypatch.setattr(ex, "env_episodes", lambda env, seed: (None, episodes, ex_typed(env, seed)))
-    monkeypatch.setattr("wanderland_nav.compose.episode_file.split_counts",
+    monkeypatch.setattr("wanderland_nav.grounding_study.cells.split_counts",
                         lambda path: {"train": 9, "val": 2, "test": 5})
 
     def ex_typed(env, seed):
@@ -149,7 +149,7 @@ def test_table3_keeps_whole_seeds_and_pairs_each_worlds_rl_gain():
 def test_a_copied_study_compares_its_own_paths_by_what_they_name():
     """A study copied to another out= moves its sampler episodes files and the ppo cells' bc.pt: still the same
     recipe. Another episodes file name (other generator settings) is not."""
-    from wanderland_nav.compose.study_cells import _portable
+    from wanderland_nav.grounding_study.cells import _portable
 
     def cfg(out: str, name: str = "episodes_study_c7d8bd09.json") -> dict:
         return {"scene": {"path": f"{out}/scenes/drift_s0"}, "seed": 1, "init_checkpoint": f"{out}/cells/bc.pt",

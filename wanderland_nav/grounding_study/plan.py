@@ -30,6 +30,8 @@ from typing import Callable
 
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose.study_config import POLICY_PHASES, PROTOCOLS, StudyConfig, StudyGroup, is_policy_phase
+from wanderland_nav.degrade import preset
+from wanderland_nav.episodes.sampler import SamplerSettings
 
 log = logging.getLogger("wanderland_nav.study")
 
@@ -44,7 +46,7 @@ class Cell:
     seed: int  # the training seed (the degradation seed for `build`)
     policy: tuple[str, str] | None = None  # eval: (environment trained in, phase: `is_policy_phase`)
     needs: tuple[str, ...] = field(default=(), compare=False)  # keys of cells that must be done first
-    protocol: str = "own"  # eval: the env's own test episodes, or "grounded_routes" (study_routes.py)
+    protocol: str = "own"  # eval: the env's own test episodes, or "grounded_routes" (routes.py)
 
     @property
     def key(self) -> str:
@@ -90,8 +92,6 @@ def _check_grid(s: StudyGroup) -> None:
     if s.trained_presets is not None and not set(s.trained_presets) <= set(s.presets):
         raise ValueError(f"study.trained_presets={s.trained_presets}: not a subset of study.presets={s.presets}")
     if s.episode_sampler:
-        from wanderland_nav.episodes.sampler import SamplerSettings
-
         try:
             SamplerSettings(**s.episode_sampler)
         except (TypeError, ValueError) as e:
@@ -142,8 +142,6 @@ def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
     s = c.study
     source = {"path": c.source.path, "demo": c.source.demo, "seed": c.source.demo_seed, "preset": c.source.demo_preset}
     if cell.kind == "build":
-        from wanderland_nav.degrade import preset
-
         return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
     sampler = {"episode_sampler": dict(s.episode_sampler)} if s.episode_sampler else {}  # absent: old hashes hold
     if cell.kind in ("init", "train"):

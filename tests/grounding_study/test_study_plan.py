@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
-from wanderland_nav.compose.study_plan import GROUNDED, Manifest, cell_digests, cell_inputs, plan_cells, run_cells
 from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
                                               unpaired_difference)
+from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, cell_inputs, plan_cells, run_cells
 
 
 def _config(tmp_path, **study) -> StudyConfig:
@@ -159,7 +159,7 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
 
 
 def test_bc_round_phases_are_fixed_policies_with_their_own_checkpoint(tmp_path):
-    from wanderland_nav.compose.study_cells import StudyCells, phase_checkpoint
+    from wanderland_nav.grounding_study.cells import StudyCells, phase_checkpoint
 
     c = _config(tmp_path, seeds=[0], fixed_policies=["untrained", "BC-round1", "BC"])
     cells = plan_cells(c.study)
@@ -169,9 +169,9 @@ def test_bc_round_phases_are_fixed_policies_with_their_own_checkpoint(tmp_path):
     for bad in ("BC-round0", "BC-round", "BC-roundx"):
         with pytest.raises(ValueError, match="BC-round<k>"):
             plan_cells(_config(tmp_path, fixed_policies=[bad]).study)
-    ex = StudyCells(c, tmp_path, None, cells)  # the train cell ran before per-round checkpoints existed
+    ex = StudyCells(c, tmp_path, None, cells)  # the train cell's folder lacks its checkpoints
     with pytest.raises(FileNotFoundError, match=r"bc_round1.pt: the BC-round1 checkpoint of train/grounded/seed0 is "
-                                                r"missing[\s\S]*study_backfill"):
+                                                r"missing; delete that cell's folder"):
         ex(r1[0], tmp_path / "eval")
 
 
@@ -181,7 +181,7 @@ def test_a_train_cell_made_with_another_recipe_is_refused_not_reused(tmp_path):
     import yaml
     from omegaconf import OmegaConf
 
-    from wanderland_nav.compose.study_cells import StudyCells
+    from wanderland_nav.grounding_study.cells import StudyCells
 
     c = _config(tmp_path, seeds=[0], presets=["holes"], train=["+exp=citywalker_rl", "debug=smoke"])
     cells = plan_cells(c.study)
@@ -310,7 +310,7 @@ def test_episode_sampler_gives_every_run_its_environment_episodes_file(tmp_path,
     as it is); without, the composed recipe is exactly the one studies composed before the key existed."""
     from omegaconf import OmegaConf
 
-    from wanderland_nav.compose.study_cells import StudyCells
+    from wanderland_nav.grounding_study.cells import StudyCells
 
     c = _config(tmp_path)
     plain = StudyCells(c, tmp_path, None, plan_cells(c.study))
