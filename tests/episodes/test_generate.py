@@ -141,3 +141,25 @@ def test_goal_images_face_the_last_segment(demo, tmp_path):
         np.testing.assert_allclose(fwd[:2] / np.linalg.norm(fwd[:2]), seg[:2] / np.linalg.norm(seg[:2]), atol=1e-6)
         assert abs(fwd[2]) < 1e-9
         np.testing.assert_allclose(R @ T[:3, 3], c[-1] + [0, 0, 1.5], atol=1e-6)
+
+
+def test_our_file_on_another_navmesh_is_regenerated_with_its_own_settings(demo, tmp_path, monkeypatch):
+    from wanderland_nav.episodes import generate
+
+    scene, nm = demo
+    settings = GeneratorSettings(sampler=SamplerSettings(batch_size=64, min_geodesic=2.0), **FAST)
+    ours = tmp_path / "ours" / "episodes.json"
+    write_scene_episodes(scene, nm, ours, num_episodes=3, seed=2, settings=settings)
+    recorded = json.loads(ours.read_text())["generator"]
+    assert not generate.refresh_if_stale(scene, ours, lambda: nm)                 # same navmesh: left as it is
+    foreign = tmp_path / "theirs" / "episodes.json"
+    foreign.parent.mkdir()
+    foreign.write_text(json.dumps({k: v for k, v in json.loads(ours.read_text()).items() if k != "generator"}))
+    before = foreign.read_bytes()
+    monkeypatch.setattr(generate, "navmesh_fingerprint", lambda path: "another navmesh")
+    assert generate.refresh_if_stale(scene, ours, lambda: nm)                     # rebuilt for the new navmesh ...
+    again = json.loads(ours.read_text())["generator"]
+    assert again["args_hash"] != recorded["args_hash"]
+    assert (again["seed"], again["num_episodes"], again["settings"]) == (2, 3, recorded["settings"])  # ... as before
+    assert not generate.refresh_if_stale(scene, ours, lambda: nm)                 # and now up to date
+    assert not generate.refresh_if_stale(scene, foreign, lambda: nm) and foreign.read_bytes() == before  # not ours: untouched

@@ -31,6 +31,11 @@ def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int
     splits: train / val / test fractions of `num`.
     """
     if existing is not None and Path(existing).is_file():
+        from planners import NavMesh
+        from wanderland_nav.episodes.generate import refresh_if_stale
+
+        # ours, on an older navmesh: rebuilt on this one
+        refresh_if_stale(scene, Path(existing), lambda: NavMesh.load(scene.navmesh_path))
         counts = split_counts(Path(existing))
         total = sum(counts.values())
         if num is None:

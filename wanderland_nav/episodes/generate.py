@@ -76,6 +76,12 @@ class GeneratorSettings:
         d.pop("render_device")  # where we render does not change the result
         return d
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "GeneratorSettings":
+        """The settings an episode file recorded (`to_dict`)."""
+        d = dict(d)
+        return cls(sampler=SamplerSettings(**d.pop("sampler")), splits=tuple(d.pop("splits")), **d)
+
 
 @dataclass
 class GenerationSummary:
@@ -473,6 +479,34 @@ def _drop_unused_image_set(out: Path, folder: Path | None, *, keep: Path) -> Non
             return
     shutil.rmtree(folder)
     log.info("%s: removed %s (the goal views of the file's previous version)", out, folder)
+
+
+def refresh_if_stale(scene, path: Path, load_navmesh: Callable[[], Any]) -> bool:
+    """Regenerate `path`, an episode file this project wrote, when the scene's navmesh (or, for goal views,
+    its splat) is no longer the one it was generated on: same count, seed and recorded settings, new routes.
+    A file someone else wrote, or one without a complete record, is left as it is. `load_navmesh()` gives the
+    scene's navmesh (loaded only when the file is stale). -> whether it was rebuilt.
+
+    Why: a changed navmesh (another navigation agent, a re-prepared scene) makes old routes wrong (a goal on
+    another island, a path through a new wall), and the file's size alone cannot tell."""
+    if not written_by_us(path):
+        return False
+    gen = load_episode_file(path).extras.get("generator", {})
+    try:
+        settings = GeneratorSettings.from_dict(gen["settings"])
+        num, seed, source = int(gen["num_episodes"]), int(gen["seed"]), gen["instructions"]
+    except (KeyError, TypeError, ValueError):
+        return False
+    if source != RuleBasedInstructions.name:
+        return False  # instructions from a source this process cannot rebuild
+    digest = args_hash(scene.name, num, seed, settings, source, navmesh_fingerprint(getattr(scene, "navmesh_path", None)),
+                       splat_fingerprint(scene, settings))
+    if gen.get("args_hash") == digest:
+        return False
+    log.warning("%s: %s was generated on another navmesh or splat; regenerating it (%d episodes, seed %d, "
+                "its recorded settings)", scene.name, path, num, seed)
+    write_scene_episodes(scene, load_navmesh(), path, num_episodes=num, seed=seed, settings=settings)
+    return True
 
 
 def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: int,
