@@ -88,8 +88,11 @@ class AgentCamera:
         return self.cfg.render_threads if self.cfg.render_threads is not None else available_cores()
 
     @torch.no_grad()
-    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor):
+    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor, extra=None):
         """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None.
+
+        extra: per-camera Gaussians `[B, M]` (`render.overlay.CameraGaussians`: the pedestrians each camera's
+        env instance holds), composited into the same renderer calls; None renders the scene alone.
 
         The B cameras are rendered in groups of `group_size(B, render_chunk)` (one batched renderer
         call each, which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
@@ -107,7 +110,7 @@ class AgentCamera:
         viewmats = self.cam_from_world(position_nav, yaw)
         size = group_size(B, self.cfg.render_chunk)
         groups = [(s, min(B, s + size)) for s in range(0, B, size)]
-        render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
+        render_group = lambda g: self._render_group(viewmats, rgb, depth, *g, extra=extra)  # noqa: E731
         if self.device.type == "cpu" and self.cfg.render_backend == "torch":
             map_single_threaded(render_group, groups, self.workers())
         else:  # GPU and compiled kernels schedule their own threads (on CPU: the env caller's intra-op threads)
@@ -116,10 +119,14 @@ class AgentCamera:
                     render_group(g)
         return rgb, depth
 
-    def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int):
+    def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int,
+                      extra=None):
         """Render cameras `s:e` of `viewmats [B, 4, 4]` into rows `s:e` of `rgb` / `depth` (disjoint per group)."""
         H, W = self.cfg.height, self.cfg.width
+        people = extra
         extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
+        if people is not None:
+            extra["extra"] = people.rows(s, e)
         out = self.renderer(
             self.gaussians,
             viewmats[s:e],
