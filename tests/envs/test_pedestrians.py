@@ -170,3 +170,54 @@ def test_crowd_in_the_env_is_deterministic_and_penalises_personal_space(demo):
     assert (a == b).all()
     c = _rollout(_env(demo, count=8))
     assert torch.allclose(a["reward"], c["reward"] - 0.5, atol=1e-5)  # the crowd is the same; every step is inside
+
+
+def test_people_are_recorded_and_replayed_as_moving_points(demo, tmp_path):
+    import rerun as rr
+
+    from wanderland_nav.envs import ExpertPolicy
+    from wanderland_nav.envs.recording import record_evaluation
+    from wanderland_nav.rollouts import load_rollout
+    from wanderland_nav.viz.recording import write_recording
+
+    env = _env(demo, count=4)
+    path = tmp_path / "ro.npz"
+    record_evaluation(env, ExpertPolicy(env), path, num_episodes=2, name="expert")
+    ro = load_rollout(path)
+    T = ro.num_steps
+    assert ro.pedestrians.shape == (T, 2, 4, 3)
+    assert float(np.abs(np.diff(ro.pedestrians, axis=0)).max()) > 0.1  # they move
+    scene, nm, eps = demo
+    out = tmp_path / "replay.rrd"
+    write_recording(out, scene=scene, rollout=ro, episodes=eps[:2], navmesh=nm, max_points=200, max_cameras=0)
+    rows = []
+    for c in rr.chunk.RrdReader(str(out)).stream():
+        rb = c.to_record_batch()
+        if c.entity_path.lstrip("/") == "world/pedestrians/agent_1" and "Points3D:positions" in rb.schema.names:
+            rows += list(zip(rb.column("step").to_pylist(), rb.column("Points3D:positions").to_pylist()))
+    assert sorted(t for t, _ in rows) == list(range(T))
+    t, pts = rows[-1]
+    want = (ro.pedestrians[t, 1] + [0.0, 0.0, 0.9]) @ np.asarray(scene.nav_from_scene)
+    np.testing.assert_allclose(np.asarray(pts, np.float64), want, atol=1e-4)
+
+
+def test_the_expert_waits_for_a_person_ahead_not_behind(demo):
+    from wanderland_nav.envs import ExpertPolicy
+
+    env = _env(demo, count=1, B=2)
+    env.set_seed(0)
+    td = env.reset()
+    expert = ExpertPolicy(env)
+    free = expert(td.clone())["action"]
+    ahead = env._pos.clone()  # agent 0: a person on its next waypoint; agent 1: one 1 m behind it
+    wp0 = free[0, 0]
+    c, s = torch.cos(env._yaw), torch.sin(env._yaw)
+    ahead[0, 0] += c[0] * wp0[0] - s[0] * wp0[1]
+    ahead[0, 1] += s[0] * wp0[0] + c[0] * wp0[1]
+    ahead[1, 0] -= c[1] * 1.0
+    ahead[1, 1] -= s[1] * 1.0
+    env.crowd.pos = ahead[:, None, :].clone()
+    env.crowd.vel = torch.zeros(2, 1, 2)
+    act = expert(td.clone())["action"]
+    assert torch.equal(act[0], torch.zeros_like(act[0])) and bool(free[0].abs().sum() > 0)  # waits
+    assert torch.equal(act[1], free[1])  # walks on

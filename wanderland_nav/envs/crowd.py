@@ -164,6 +164,27 @@ class Crowd:
         """Horizontal centre distance `[B, P]` from each robot `[B, 3]` nav to its instance's people."""
         return (self.pos[..., :2] - robot_pos[:, None, :2].float().cpu()).norm(dim=-1)
 
+    def in_the_way(self, robot_pos: torch.Tensor, robot_yaw: torch.Tensor, waypoints: torch.Tensor,
+                   margin: float = 0.3, horizon: float = 1.0) -> torch.Tensor:
+        """`[B]` bool: a person now, or where it will be at its current velocity within `horizon` seconds, comes
+        within `radius + robot_radius + margin` of the robot's next step (the segment from the robot to its first
+        body-frame waypoint, `waypoints [B, K, 2]`), ahead of the robot. The yielding expert waits while this holds."""
+        c = self.cfg
+        xy, yaw = robot_pos[:, None, :2].float().cpu(), robot_yaw.float().cpu().reshape(-1, 1)
+        cos, sin = torch.cos(yaw), torch.sin(yaw)
+        goal = waypoints[:, :1].float().cpu()  # [B, 1, 2] body frame
+        reach = c.radius + c.robot_radius + margin
+        wait = torch.zeros(self.B, dtype=torch.bool)
+        for t in torch.linspace(0.0, horizon, 5).tolist():  # a few look-ahead times, each batched over [B, P]
+            rel = self.pos[..., :2] + t * self.vel - xy
+            body = torch.stack([cos * rel[..., 0] + sin * rel[..., 1], -sin * rel[..., 0] + cos * rel[..., 1]], -1)
+            seg = goal.expand_as(body)
+            u = ((body * seg).sum(-1) / (seg * seg).sum(-1).clamp_min(1e-9)).clamp(0, 1)
+            gap = (body - u[..., None] * seg).norm(dim=-1)
+            ahead = (body * seg).sum(-1) > 0  # moving on takes the robot away from people behind it
+            wait |= ((gap < reach) & ahead).any(1)
+        return wait
+
     def gaussians(self, device="cpu"):
         """The people as `CameraGaussians` `[B, P * 6]` (scene frame) on `device`, for the B env cameras."""
         return body_gaussians(self.pos, self.yaw, self.height, self.colour, self.R).to(device)
