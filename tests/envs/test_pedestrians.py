@@ -221,3 +221,21 @@ def test_the_expert_waits_for_a_person_ahead_not_behind(demo):
     act = expert(td.clone())["action"]
     assert torch.equal(act[0], torch.zeros_like(act[0])) and bool(free[0].abs().sum() > 0)  # waits
     assert torch.equal(act[1], free[1])  # walks on
+
+
+def test_two_people_walking_head_on_pass_each_other_without_overlap():
+    from wanderland_nav.envs.social_force import integrate
+
+    cfg = PedestrianConfig(count=2)
+    pos = torch.tensor([[[-4.0, 0.05], [4.0, -0.05]]])
+    vel = torch.zeros(1, 2, 2)
+    desired = torch.tensor([[[1.3, 0.0], [-1.3, 0.0]]])
+    far = torch.full((1, 1, 2), 1e3)  # no robot nearby
+    closest = float("inf")
+    for _ in range(16):  # 8 s
+        pos, vel, _ = integrate(pos, vel, desired, torch.full((1, 2), 1.3 * 1.3), torch.full((1, 2), cfg.radius),
+                                torch.ones(1, 2, dtype=torch.bool), far, torch.zeros(1, 1, 2),
+                                torch.full((1, 1), cfg.robot_radius), 0.5, cfg)
+        closest = min(closest, float((pos[0, 0] - pos[0, 1]).norm()))
+    assert float(pos[0, 0, 0]) > 3.0 and float(pos[0, 1, 0]) < -3.0  # both got past
+    assert closest > 2 * cfg.radius - 0.05, closest  # by stepping aside, not through each other
