@@ -97,7 +97,7 @@ def test_body_gaussians_project_where_the_person_stands(demo):
     assert int(ys.min()) < top and int(ys.max()) > 31.5 + f * 0.75 / 4.0  # and the legs reach down near the feet
 
 
-def _env(demo, count=0, camera=False, B=2, **ped):
+def _env(demo, count=0, camera=False, B=2, episode_metrics=False, **ped):
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
 
@@ -108,6 +108,7 @@ def _env(demo, count=0, camera=False, B=2, **ped):
     c.camera.history = 1
     c.termination.max_steps = 40
     c.pedestrians.count = count
+    c.episode_metrics = episode_metrics
     for k, v in ped.items():
         setattr(c.pedestrians, k, v)
     kw = {}
@@ -147,7 +148,7 @@ def test_off_by_default_is_the_pedestrian_free_task_bit_for_bit(demo):
 
 
 def test_a_person_on_the_robot_is_an_intervention_with_its_own_cause(demo):
-    env = _env(demo, count=3)
+    env = _env(demo, count=3, episode_metrics=True)
     env.set_seed(0)
     td = env.reset()
     env.crowd.pos = env._pos[:, None, :].expand(-1, env.crowd.P, -1).clone()  # scripted: everyone on the robot
@@ -158,6 +159,12 @@ def test_a_person_on_the_robot_is_an_intervention_with_its_own_cause(demo):
     for m in (m0, m1):
         assert m.intervention and m.intervention_cause == "pedestrian" and m.person_collisions == 1
         assert m.min_person_distance < 0.6 and m.near_05_seconds == 0.5 and m.pedestrians == 3
+    assert td[keys.EPISODE_PERSON_COLLISIONS].flatten().tolist() == [1, 1]  # the TorchRL view, at done
+    assert td[keys.EPISODE_NEAR_05_SECONDS].flatten().tolist() == [0.5, 0.5]
+    np.testing.assert_allclose(td[keys.EPISODE_MIN_PERSON_DISTANCE].flatten().numpy(),
+                               [m0.min_person_distance, m1.min_person_distance], rtol=1e-6)
+    np.testing.assert_allclose(td[keys.EPISODE_PATH_IRREGULARITY].flatten().numpy(),
+                               [m0.path_irregularity, m1.path_irregularity], rtol=1e-5)
     from wanderland_nav.rl.report import comparison_table
 
     table = comparison_table({"x": [m0.to_dict(), m1.to_dict()]})

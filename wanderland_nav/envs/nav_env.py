@@ -247,6 +247,9 @@ class NavEnv(EnvBase):
             obs.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
                               i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
                         for key in keys.EPISODE_KEYS})
+            if self.crowd is not None:
+                obs.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
+                            for key in keys.EPISODE_SOCIAL_KEYS})
         self.observation_spec = Composite(obs, shape=B, device=dev)
         if k.action_mode == "waypoints":
             r = k.waypoint_range
@@ -578,7 +581,17 @@ class NavEnv(EnvBase):
         return {keys.EPISODE_SUCCESS: col(success), keys.EPISODE_SPL: col(spl), keys.EPISODE_NAVIGATION_ERROR: col(ne),
                 keys.EPISODE_PATH_LENGTH: col(self._path_len), keys.EPISODE_SHORTEST_LENGTH: col(shortest),
                 keys.EPISODE_STEPS: col(self._steps), keys.EPISODE_COLLISIONS: col(self._collisions),
-                keys.EPISODE_INTERVENTION: col(self._outcome[keys.EPISODE_INTERVENTION])}
+                keys.EPISODE_INTERVENTION: col(self._outcome[keys.EPISODE_INTERVENTION]),
+                **({} if self.social is None else self._social_episode_metrics(shortest))}
+
+    def _social_episode_metrics(self, shortest: torch.Tensor) -> dict:
+        """`(EPISODE, social name)` -> `[B, 1]`, as `metrics.social_metrics` defines them."""
+        v, T = self.social.values, self.config.kinematics.control_period
+        irregularity = v["turning"] / torch.maximum(self._path_len, shortest).clamp_min(1e-6)
+        col = lambda x: x.unsqueeze(-1)  # noqa: E731
+        return {keys.EPISODE_PERSON_COLLISIONS: col(v["contacts"]), keys.EPISODE_NEAR_05_SECONDS: col(v["near_05"] * T),
+                keys.EPISODE_NEAR_10_SECONDS: col(v["near_10"] * T), keys.EPISODE_MIN_PERSON_DISTANCE: col(v["min_distance"]),
+                keys.EPISODE_PATH_IRREGULARITY: col(irregularity.float())}
 
     # ------------------------------------------------------------------ device and display
 
