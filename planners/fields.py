@@ -111,6 +111,28 @@ class GeodesicField:
         out = torch.from_numpy(d.astype(np_dtype).reshape(shape)) if np_dtype else torch.from_numpy(d).to(out_dtype).reshape(shape)
         return out if device is None or device.type == "cpu" else out.to(device)
 
+    def next_point(self, points, goal_index) -> tuple[torch.Tensor, torch.Tensor]:
+        """Where a walker at scene-frame points[B,3] heads on its shortest path to goal goal_index[B]:
+        -> (distance `[B]` float64, inf where apart; next `[B, 3]` float64 scene frame: the first corner the
+        path bends around, or the goal itself when visible; the point itself where the distance is inf).
+
+        The path's first leg, for agents that follow shortest paths step by step (pedestrians) without
+        building whole polylines: one batched exact lookup."""
+        p = torch.as_tensor(points, dtype=torch.float64).detach().cpu().reshape(-1, 3).numpy()
+        gi = torch.as_tensor(goal_index).cpu().reshape(-1).numpy().astype(np.int64)
+        if gi.shape[0] != p.shape[0]:
+            raise ValueError(f"GeodesicField.next_point: {p.shape[0]} points but {gi.shape[0]} goal indices")
+        f = self._np
+        loc = p @ f["R_T"] - f["bmin"]
+        with single_thread():
+            d, src = self.query_local(loc, gi)
+        M = f["M"]
+        idx = np.where(src == M, M + gi, src)  # a visible goal: its row after the M corners
+        ok = src >= 0
+        nxt = loc.copy()
+        nxt[ok, 0], nxt[ok, 1] = f["src_x"][idx[ok]], f["src_y"][idx[ok]]
+        return torch.from_numpy(d), torch.from_numpy((nxt + f["bmin"]) @ f["R_T"].T)
+
     def query_local(self, loc: np.ndarray, gi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distances `[B]` (float64, inf where apart) from local nav-frame points loc[B,3] to goals gi[B],
         and each point's *source* `[B]` int64: the corner a < M its shortest path bends around first

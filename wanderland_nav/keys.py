@@ -133,6 +133,25 @@ EPISODE_KEYS = (EPISODE_SUCCESS, EPISODE_SPL, EPISODE_NAVIGATION_ERROR, EPISODE_
                 EPISODE_STEPS, EPISODE_COLLISIONS, EPISODE_INTERVENTION)
 """Every `(EPISODE, name)` key the env writes."""
 
+EPISODE_PERSON_COLLISIONS = (EPISODE, "person_collisions")
+"""int64 `[1]`: steps in which a pedestrian touched the agent (`env.pedestrians`; `EpisodeMetrics` has the same)."""
+
+EPISODE_NEAR_05_SECONDS = (EPISODE, "near_05_seconds")
+"""float32 `[1]`: seconds with a pedestrian within 0.5 m (centre distance)."""
+
+EPISODE_NEAR_10_SECONDS = (EPISODE, "near_10_seconds")
+"""float32 `[1]`: seconds with a pedestrian within 1.0 m."""
+
+EPISODE_MIN_PERSON_DISTANCE = (EPISODE, "min_person_distance")
+"""float32 `[1]`: the closest centre distance to any pedestrian so far, metres (inf before the first step)."""
+
+EPISODE_PATH_IRREGULARITY = (EPISODE, "path_irregularity")
+"""float32 `[1]`: total absolute heading change per metre of max(path, shortest) length, rad/m."""
+
+EPISODE_SOCIAL_KEYS = (EPISODE_PERSON_COLLISIONS, EPISODE_NEAR_05_SECONDS, EPISODE_NEAR_10_SECONDS,
+                       EPISODE_MIN_PERSON_DISTANCE, EPISODE_PATH_IRREGULARITY)
+"""The `(EPISODE, name)` keys the env adds with pedestrians on (`env.pedestrians.count > 0`)."""
+
 # --------------------------------------------------------------------------- actions
 ACTION = "action"
 """float32: `[K, 2]` body-frame waypoints (x forward, y left, metres) in waypoint mode, or `[2]`

@@ -32,9 +32,12 @@ FIELDS = {"NE": "navigation_error", "SR": "success", "SPL": "spl", "IR": "interv
 #: lower is better for these; the sign of the relative change is flipped so "+" always means better
 #: IR split by the rule that ended the episode (`EpisodeMetrics.intervention_cause`); they sum to IR. The names
 #: are `envs.rewards.INTERVENTION_CAUSES` (report sits below envs, so they are spelled here; a test checks they agree)
-CAUSE_COLUMNS = {f"IR_{c}": c for c in ("off_navmesh", "stuck", "no_progress")}
+CAUSE_COLUMNS = {f"IR_{c}": c for c in ("off_navmesh", "stuck", "no_progress", "pedestrian")}
 FIELDS.update({c: "intervention_cause" for c in CAUSE_COLUMNS})
-LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS}
+#: with pedestrians on (records with `pedestrians > 0`), the tables add these (`envs.metrics.social_metrics`)
+SOCIAL_COLUMNS = ("person_collisions", "near_05_seconds", "near_10_seconds", "min_person_distance", "path_irregularity")
+LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS, "person_collisions", "near_05_seconds",
+                   "near_10_seconds", "path_irregularity"}
 RATES = {"SR", "IR", *CAUSE_COLUMNS}
 #: suffix of a row evaluated with sampled actions (the stochastic policy) instead of the mean waypoints
 SAMPLED = " sampled"
@@ -155,8 +158,12 @@ def seed_table(runs: Mapping[str, Sequence[Sequence[Mapping]]], baseline: str | 
 
 
 def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None = None,
-                     columns: Sequence[str] = TABLE_COLUMNS, pairs: Sequence[tuple[str, str]] = ()) -> str:
-    """One evaluation per row: `rows` name -> its per-episode records (`EvaluationResult.records`)."""
+                     columns: Sequence[str] | None = None, pairs: Sequence[tuple[str, str]] = ()) -> str:
+    """One evaluation per row: `rows` name -> its per-episode records (`EvaluationResult.records`).
+    columns: default `TABLE_COLUMNS`, plus `SOCIAL_COLUMNS` when every row was evaluated among pedestrians."""
+    if columns is None:
+        social = rows and all(r and r[0].get("pedestrians", 0) > 0 for r in rows.values())
+        columns = TABLE_COLUMNS + (SOCIAL_COLUMNS if social else ())
     return seed_table({k: [v] for k, v in rows.items()}, baseline, columns, pairs=pairs)
 
 

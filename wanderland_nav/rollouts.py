@@ -20,6 +20,7 @@ Layout (version `ROLLOUT_VERSION`), `T` recorded steps of `B` agents, all poses 
 | `episode_index`, `step_count` | i64 `[T, B]` | episode (index into `episode_ids`); steps taken before |
 | `rgb` (optional) | u8 `[T, B, H, W, 3]` | the frame observed at `position` |
 | `depth` (optional) | f32 `[T, B, H, W, 1]` | z-depth for `rgb` |
+| `pedestrians` (optional) | f32 `[T, B, P, 3]` | nav-frame feet of agent b's people after step t (`env.pedestrians`) |
 | `episode_ids` | str `[E]` | `episode_id` of each episode index |
 | `meta_json` | str | `RolloutMeta` (version, scene, up axis, camera, control period, metrics of finished episodes) |
 
@@ -86,6 +87,7 @@ class Rollout:
     meta: RolloutMeta
     rgb: np.ndarray | None = None
     depth: np.ndarray | None = None
+    pedestrians: np.ndarray | None = None
 
     @property
     def num_steps(self) -> int:
@@ -120,7 +122,7 @@ _FIELDS: dict[str, tuple[str, int | None]] = {
     "done": ("b", 2), "success": ("b", 2), "collision": ("b", 2), "episode_index": ("iu", 2),
     "step_count": ("iu", 2),
 }
-_OPTIONAL = {"rgb": ("u", 5), "depth": ("f", 5)}
+_OPTIONAL = {"rgb": ("u", 5), "depth": ("f", 5), "pedestrians": ("f", 4)}
 
 
 def save_rollout(path: str | Path, rollout: Rollout, *, compress: bool = True) -> Path:
@@ -165,7 +167,7 @@ def load_rollout(path: str | Path) -> Rollout:
     meta = RolloutMeta(**{k: v for k, v in meta_d.items() if k in known})
     _check(arrays, str(path))
     return Rollout(**{k: arrays[k] for k in _FIELDS}, episode_ids=arrays["episode_ids"], meta=meta,
-                   rgb=arrays.get("rgb"), depth=arrays.get("depth"))
+                   rgb=arrays.get("rgb"), depth=arrays.get("depth"), pedestrians=arrays.get("pedestrians"))
 
 
 def _check(arrays: dict[str, np.ndarray], where: str) -> None:

@@ -206,8 +206,8 @@ def test_nodes_as_gaussians_render_as_the_cut():
     torch.testing.assert_close(render(as_raw, vm, K, 32, 32).rgb, render(h, vm, K, 32, 32).rgb, rtol=0, atol=2e-3)
 
 
-@pytest.mark.parametrize("mode", ["RGB+ED", "D"])
-def test_cut_pairs_render_as_padded_one_camera_scenes(mode):
+@pytest.mark.parametrize("mode,people", [("RGB+ED", False), ("D", False), ("RGB+ED", True)])
+def test_cut_pairs_render_as_padded_one_camera_scenes(mode, people):
     """The torch path projects each camera's cut as given (camera, node) pairs; the gsplat path pads the cuts
     into C one-camera scenes. Both must draw the same images (cuts of different sizes per camera)."""
     from wanderland_nav.render import api
@@ -221,8 +221,15 @@ def test_cut_pairs_render_as_padded_one_camera_scenes(mode):
     assert counts.min() * 2 < counts.max()
     opts = dict(near_plane=0.01, far_plane=1e10, sh_degree=h.sh_degree, render_mode=mode, rasterize_mode="classic",
                 camera_model="pinhole", chunk_elems=api.DEFAULT_CHUNK_ELEMS, compiled=False)
-    pairs = api._render_cut(api.rasterization, h, vm, K, 32, 32, bg, **opts)
-    padded = api._render_cut(lambda *a, **k: api.rasterization(*a, **k), h, vm, K, 32, 32, bg, **opts)
+    extra = None
+    if people:  # each camera's own extra rows (pedestrians), composited in the same call
+        from wanderland_nav.render.overlay import CameraGaussians
+
+        gen = torch.Generator().manual_seed(1)
+        extra = CameraGaussians(torch.randn(5, 4, 3, generator=gen) * 2, torch.eye(3).expand(5, 4, 3, 3) * 0.05,
+                                torch.full((5, 4), 0.9), torch.rand(5, 4, 3, generator=gen))
+    pairs = api._render_cut(api.rasterization, h, vm, K, 32, 32, bg, extra=extra, **opts)
+    padded = api._render_cut(lambda *a, **k: api.rasterization(*a, **k), h, vm, K, 32, 32, bg, extra=extra, **opts)
     for a, b in zip(pairs, padded):
         assert a.shape == b.shape
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)

@@ -88,11 +88,13 @@ class AgentCamera:
         return self.cfg.render_threads if self.cfg.render_threads is not None else available_cores()
 
     @torch.no_grad()
-    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor, rows: torch.Tensor | None = None):
+    def render(self, position_nav: torch.Tensor, yaw: torch.Tensor, rows: torch.Tensor | None = None, extra=None):
         """-> rgb uint8 `[B, H, W, 3]`, depth float32 `[B, H, W, 1]` (0 where empty) or None.
 
         rows: bool `[B]`, the cameras to render; the others get black frames and zero depth (agents whose
         frames nobody reads, e.g. an evaluation's episodes past the last one it counts). None: all.
+        extra: per-camera Gaussians `[B, M]` (`render.overlay.CameraGaussians`: the pedestrians each camera's
+        env instance holds), composited into the same renderer calls; None renders the scene alone.
 
         The B cameras are rendered in groups of `group_size(B, render_chunk)` (one batched renderer
         call each, which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
@@ -100,7 +102,8 @@ class AgentCamera:
         (`render.shards`): same images for any thread count."""
         if rows is not None and not bool(rows.all()):
             idx = rows.nonzero().squeeze(1)
-            part_rgb, part_depth = self.render(position_nav.index_select(0, idx), yaw.index_select(0, idx))
+            part_rgb, part_depth = self.render(position_nav.index_select(0, idx), yaw.index_select(0, idx),
+                                               extra=None if extra is None else extra.rows_at(idx))
             rgb = part_rgb.new_zeros((rows.shape[0],) + part_rgb.shape[1:]).index_copy_(0, idx, part_rgb)
             depth = None if part_depth is None else part_depth.new_zeros(
                 (rows.shape[0],) + part_depth.shape[1:]).index_copy_(0, idx, part_depth)
@@ -117,7 +120,7 @@ class AgentCamera:
         viewmats = self.cam_from_world(position_nav, yaw)
         size = group_size(B, self.cfg.render_chunk)
         groups = [(s, min(B, s + size)) for s in range(0, B, size)]
-        render_group = lambda g: self._render_group(viewmats, rgb, depth, *g)  # noqa: E731
+        render_group = lambda g: self._render_group(viewmats, rgb, depth, *g, extra=extra)  # noqa: E731
         if self.device.type == "cpu" and self.cfg.render_backend == "torch":
             map_single_threaded(render_group, groups, self.workers())
         else:  # GPU and compiled kernels schedule their own threads (on CPU: the env caller's intra-op threads)
@@ -126,10 +129,14 @@ class AgentCamera:
                     render_group(g)
         return rgb, depth
 
-    def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int):
+    def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int,
+                      extra=None):
         """Render cameras `s:e` of `viewmats [B, 4, 4]` into rows `s:e` of `rgb` / `depth` (disjoint per group)."""
         H, W = self.cfg.height, self.cfg.width
+        people = extra
         extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
+        if people is not None:
+            extra["extra"] = people.rows(s, e)
         out = self.renderer(
             self.gaussians,
             viewmats[s:e],

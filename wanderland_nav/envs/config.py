@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
+from wanderland_nav.envs.pedestrian_config import PedestrianConfig
+
 ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")
 EPISODE_ORDERS = ("sample", "iterate")
@@ -85,6 +87,7 @@ class NavEnvConfig:
     kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
+    pedestrians: PedestrianConfig = field(default_factory=PedestrianConfig)  # people on the navmesh; count 0: off
     episode_order: str = "sample"  # "sample": seeded random draws; "iterate": 0, 1, 2, ... (evaluation)
     split: str | None = None  # episodes.json split the factory loads (None: all)
     goal_image: str = "auto"  # "auto": load the episode's goal_image file; "render": render every goal view; "none"
@@ -137,6 +140,7 @@ class NavEnvConfig:
         for name, ok, value in checks:
             if not ok:
                 raise ValueError(f"NavEnvConfig.{name}: invalid value {value!r}")
+        self.pedestrians.validate()
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

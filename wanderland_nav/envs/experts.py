@@ -116,6 +116,7 @@ class ExpertPolicy(TensorDictModuleBase):
         self.register_buffer("paths", padded.to(env.device, torch.float32), persistent=False)
         self.register_buffer("cum", arc_lengths(padded).to(env.device, torch.float32), persistent=False)  # [E, P]
         self._progress: torch.Tensor | None = None  # [B] arc length reached along each agent's path
+        self.crowd = getattr(env, "crowd", None)  # pedestrians: the expert waits while one is in its way
 
     @staticmethod
     def _episode_path(env, i: int, source: str) -> np.ndarray:
@@ -199,8 +200,13 @@ class ExpertPolicy(TensorDictModuleBase):
         s = self._project(pos, ep, s_prev)
         self._progress = s
         wp = waypoints_along_path(self.paths[ep], self.cum[ep], s, pos, yaw, self.num_waypoints, self.spacing)
+        if self.crowd is not None and self.crowd.B == wp.shape[0]:  # yield: stand still this step
+            wait = self.crowd.in_the_way(pos, yaw, wp).to(wp.device)
+            wp = torch.where(wait[:, None, None], torch.zeros_like(wp), wp)
         if self.mode == "velocity":
             v, omega = track_point_command(wp[:, 0], self.kin.control_period, self.kin.control_period, self.kin)
+            if self.crowd is not None and self.crowd.B == wp.shape[0]:
+                v, omega = torch.where(wait, torch.zeros_like(v), v), torch.where(wait, torch.zeros_like(omega), omega)
             action = torch.stack([v, omega], -1)
         else:
             action = wp

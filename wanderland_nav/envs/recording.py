@@ -45,7 +45,11 @@ class RolloutRecorder:
         if self.max_steps is not None and len(self._steps) >= self.max_steps:
             return
 
-        self._steps.append(step_arrays(td, td_next, self.frames))
+        s = step_arrays(td, td_next, self.frames)
+        crowd = getattr(self.env, "crowd", None)
+        if crowd is not None:  # the people after the step (nav frame), for the replay's moving entities
+            s["pedestrians"] = crowd.pos.detach().cpu().numpy().astype(np.float32)
+        self._steps.append(s)
 
     def add_metrics(self, metrics) -> None:
         self.metrics.extend(m.to_dict() if hasattr(m, "to_dict") else dict(m) for m in metrics)
@@ -68,7 +72,8 @@ class RolloutRecorder:
         )
         ids = np.asarray([str(e.episode_id) for e in env.episodes], dtype=np.str_)
         return Rollout(**{k: st[k].astype(np.float32) if st[k].dtype.kind == "f" else st[k] for k in _FIELDS},
-                       episode_ids=ids, meta=meta, rgb=st.get("rgb"), depth=st.get("depth"))
+                       episode_ids=ids, meta=meta, rgb=st.get("rgb"), depth=st.get("depth"),
+                       pedestrians=st.get("pedestrians"))
 
     def save(self, path: str | Path) -> Path:
         return save_rollout(path, self.rollout())

@@ -16,6 +16,7 @@ import torch
 
 from .gaussians import Gaussians
 from .hierarchy import GaussianHierarchy
+from .overlay import CameraGaussians, append_per_camera, append_pairs
 from .packed import project_packed, project_view_pairs
 from .projection import CAMERA_MODELS, project_gaussians, quat_scale_to_covar
 from .rasterize import DEFAULT_CHUNK_ELEMS, rasterize_packed, rasterize_to_pixels
@@ -320,6 +321,7 @@ def render(
     rasterize_mode: str = "classic",
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     backend: str = "torch",
+    extra: CameraGaussians | None = None,
 ) -> RenderOutput:
     """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1].
 
@@ -328,6 +330,9 @@ def render(
 
     backend: "torch" (the packed eager fast path), "compiled" (its torch.compile'd hot stages) or
     "gsplat" (gsplat's CUDA kernels, optional extra). All three take the same arguments.
+
+    extra: per-camera Gaussians (`overlay.CameraGaussians`, e.g. pedestrians) composited into each camera's
+    set before rasterisation, so they are depth-sorted with the scene; None renders the scene alone.
     """
     _check(backend in BACKENDS, f"backend must be one of {BACKENDS}, got {backend!r}")
     g = gaussians.leaves if isinstance(gaussians, GaussianHierarchy) else gaussians
@@ -347,7 +352,12 @@ def render(
                 rasterize_mode=rasterize_mode, camera_model=camera_model, chunk_elems=chunk_elems,
                 compiled=backend == "compiled")
     if isinstance(gaussians, GaussianHierarchy):
-        colors, alphas = _render_cut(raster, gaussians, viewmats, Ks, width, height, bgs, **opts)
+        colors, alphas = _render_cut(raster, gaussians, viewmats, Ks, width, height, bgs, extra=extra, **opts)
+    elif extra is not None:  # the whole plain set per camera, the camera's own rows appended
+        N = g.means.shape[0]
+        rows = append_per_camera(g.means.expand(C, N, 3), g.covariances().expand(C, N, 3, 3),
+                                 g.opacities.expand(C, N), g.sh_coeffs.expand(C, *g.sh_coeffs.shape), extra)
+        colors, alphas = _render_rows(raster, *rows, viewmats, Ks, width, height, bgs, **opts)
     else:
         covars = None if backend == "gsplat" else g.covariances()  # cached for a fixed scene (`Gaussians.covariances`)
         colors, alphas, _ = raster(g.means, g.quats, g.scales, g.opacities, g.sh_coeffs, viewmats, Ks, width, height,
@@ -361,15 +371,15 @@ def render(
 
 
 @torch.no_grad()
-def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, **opts):
-    """Each camera renders its own cut of `h`. The torch backends project the cut's (camera, node) pairs as
-    they are (`packed.project_view_pairs`: no padding, no all-pairs bound); gsplat gets C one-camera scenes,
-    each holding its cut padded to the longest with transparent rows."""
+def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, extra=None, **opts):
+    """Each camera renders its own cut of `h` (plus its own `extra` rows). The torch backends project the cut's
+    (camera, node) pairs as they are (`packed.project_view_pairs`: no padding, no all-pairs bound); gsplat gets
+    C one-camera scenes, each holding its cut padded to the longest with transparent rows."""
     C = viewmats.shape[0]
     cam, node = h.cut(viewmats, Ks, width, height, h.target_px, near_plane=opts["near_plane"],
                       camera_model=opts["camera_model"])
     if raster is rasterization:
-        means, covars, opac, sh = h.gather(node)
+        cam, means, covars, opac, sh = append_pairs(cam, *h.gather(node), extra)
         return _rasterize_view_pairs(means, covars, opac, sh, cam, viewmats, Ks, bgs, width=width, height=height,
                                      **opts)
     counts = torch.bincount(cam, minlength=C)
@@ -379,8 +389,15 @@ def _render_cut(raster, h: GaussianHierarchy, viewmats, Ks, width, height, bgs, 
     valid = idx >= 0
     means, covars, opac, sh = h.gather(idx.clamp_min(0).view(-1))
     M = idx.shape[1]
-    colors, alphas, _ = raster(means.view(C, M, 3), None, None, opac.view(C, M) * valid, sh.view(C, M, *sh.shape[1:]),
-                               viewmats[:, None], Ks[:, None], width, height, covars=covars.view(C, M, 3, 3),
+    rows = append_per_camera(means.view(C, M, 3), covars.view(C, M, 3, 3), opac.view(C, M) * valid,
+                             sh.view(C, M, *sh.shape[1:]), extra)
+    return _render_rows(raster, *rows, viewmats, Ks, width, height, bgs, **opts)
+
+
+def _render_rows(raster, means, covars, opac, sh, viewmats, Ks, width, height, bgs, **opts):
+    """Camera c renders rows `[c]` of the per-camera sets `means [C, M, 3]` etc. (gsplat's leading batch
+    dimension: C one-camera scenes)."""
+    colors, alphas, _ = raster(means, None, None, opac, sh, viewmats[:, None], Ks[:, None], width, height, covars=covars,
                                backgrounds=None if bgs is None else bgs[:, None], **opts)
     return colors[:, 0], alphas[:, 0]
 

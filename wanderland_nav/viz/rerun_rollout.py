@@ -8,6 +8,7 @@ Entity paths (under `prefix`, default `world`; plots under `plots_prefix`):
 * `world/agents/agent_<b>/camera`: static body <- camera transform and `Pinhole` (OpenCV axes), `Image`
   per step (and `camera/depth`: `DepthImage` when depth is present);
 * `world/agents/agent_<b>/waypoints`: the policy's predicted body-frame waypoints, per step;
+* `world/pedestrians/agent_<b>`: agent b's people (`env.pedestrians`) as points at waist height, per step;
 * `world/trajectories/agent_<b>/ep_<id>_<k>`: the realised path of the k-th episode segment of that agent,
   shown from its first step (cleared when the next episode starts);
 * `plots/reward/agent_<b>`, `plots/distance_to_goal/agent_<b>`: scalars per step;
@@ -121,6 +122,14 @@ def log_rollout(rec: rr.RecordingStream, rollout: Rollout, *, frames: FrameSourc
             rr.send_columns(f"{base}/waypoints", indexes=idx,
                             columns=rr.Points3D.columns(positions=pts).partition([K_wp] * T), recording=rec)
             rec.log(f"{base}/waypoints", rr.Points3D.from_fields(colors=[[60, 140, 255]], radii=0.08), static=True)
+        if rollout.pedestrians is not None:  # agent b's people: moving points, one batched call over T steps
+            people = rollout.pedestrians[:, b].astype(np.float64) + [0.0, 0.0, 0.9]  # nav, at the waist
+            people = people @ np.asarray(meta.nav_from_scene, np.float64)
+            P = people.shape[1]
+            rr.send_columns(f"{prefix}/pedestrians/agent_{b}", indexes=idx, recording=rec,
+                            columns=rr.Points3D.columns(positions=people.reshape(-1, 3)).partition([P] * T))
+            rec.log(f"{prefix}/pedestrians/agent_{b}", rr.Points3D.from_fields(colors=[[255, 120, 40]], radii=0.3),
+                    static=True)
         for name in ("reward", "distance_to_goal"):
             rr.send_columns(f"{plots_prefix}/{name}/agent_{b}", indexes=idx,
                             columns=rr.Scalars.columns(scalars=getattr(rollout, name)[:, b].astype(np.float64)),

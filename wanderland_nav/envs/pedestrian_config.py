@@ -1,0 +1,77 @@
+"""Typed settings of the pedestrians (`env.pedestrians.*`): the crowd model's constants and their sources.
+
+Off by default (`count: 0`): the env then builds no crowd and runs exactly the pedestrian-free task.
+
+Sources of the defaults:
+* preferred walking speed: normal with mean 1.34 m/s, s.d. 0.26 m/s (Helbing & Molnar 1995, "Social force
+  model for pedestrian dynamics", Phys. Rev. E 51), clipped to the 1.0-1.6 m/s of everyday walking;
+* the social repulsion (Helbing & Molnar 1995): relaxation time 0.5 s, elliptical potential
+  V0 exp(-b / sigma) with V0 = 2.1 m^2/s^2, sigma = 0.3 m, step time 2 s, field of view 200 degrees with weight
+  c = 0.5 behind it;
+* the physical contact forces (Helbing, Farkas & Vicsek 2000, "Simulating dynamical features of escape panic",
+  Nature 407): mass 80 kg, body force k = 1.2e5 kg/s^2, sliding friction kappa = 2.4e5 kg/(m s), body radius
+  0.25-0.35 m (0.3 here), speed capped at 1.3 x preferred (their v_max);
+* walls: the navmesh itself (each step's motion slides along its boundary, `NavMesh.move_along_surface`)
+  instead of the model's wall force: the navmesh is the walkable region by construction.
+Pauses, respawns and the waypoint pool are behaviour settings of this simulator, not literature values.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass
+class PedestrianConfig:
+    """People walking navmesh shortest paths between random waypoints, avoiding each other and the robot."""
+
+    count: int = 0  # pedestrians per env instance; 0: off (no crowd is built)
+    speed_mean: float = 1.34  # m/s preferred speed (Helbing & Molnar 1995)
+    speed_std: float = 0.26  # m/s
+    speed_min: float = 1.0  # m/s: preferred speeds are clipped to [speed_min, speed_max]
+    speed_max: float = 1.6  # m/s
+    max_speed_factor: float = 1.3  # |v| <= factor x preferred speed (Helbing et al. 2000)
+    radius: float = 0.3  # m body radius (Helbing et al. 2000: 0.25-0.35)
+    mass: float = 80.0  # kg
+    relaxation_time: float = 0.5  # s, tau
+    social_strength: float = 2.1  # m^2/s^2, V0 (Helbing & Molnar 1995)
+    social_range: float = 0.3  # m, sigma
+    robot_social_strength: float = 2.1  # m^2/s^2: V0 of the robot as people see it (default: as a person)
+    step_time: float = 2.0  # s, the look-ahead of the elliptical potential
+    view_angle_deg: float = 200.0  # 2 phi, the field of view
+    out_of_view_weight: float = 0.5  # c, the weight of bodies outside it
+    body_stiffness: float = 1.2e5  # kg/s^2, k
+    friction: float = 2.4e5  # kg/(m s), kappa
+    dt: float = 0.02  # s integration step of the forces (the contact force needs ~0.02 s to stay stable)
+    waypoints: int = 32  # destinations drawn once on the robot's island; people walk between them
+    arrive_distance: float = 0.5  # m geodesic: a destination closer than this is reached
+    pause_probability: float = 0.3  # chance of pausing at a reached destination
+    pause_min: float = 1.0  # s
+    pause_max: float = 5.0  # s
+    respawn_after: float = 8.0  # s blocked (moving < 20 % of the preferred speed) before respawning elsewhere
+    spawn_clearance: float = 2.0  # m from the robot at every (re)spawn
+    robot_radius: float = 0.3  # m: a person closer than radius + robot_radius (centres) is a collision
+    collision_intervention: bool = True  # a collision ends the episode as an intervention (cause "pedestrian")
+    personal_space: float = 0.5  # m between centres: the zone the reward penalty applies to
+    personal_space_penalty: float = 0.0  # reward per step with a person inside `personal_space` (0: none)
+    height_min: float = 1.6  # m body height drawn per person
+    height_max: float = 1.9  # m
+
+    def validate(self) -> None:
+        checks = [
+            ("count", self.count >= 0), ("speed_mean", self.speed_mean > 0), ("speed_std", self.speed_std >= 0),
+            ("speed_min", 0 < self.speed_min <= self.speed_max), ("max_speed_factor", self.max_speed_factor >= 1),
+            ("radius", self.radius > 0), ("mass", self.mass > 0), ("relaxation_time", self.relaxation_time > 0),
+            ("social_range", self.social_range > 0), ("step_time", self.step_time >= 0),
+            ("view_angle_deg", 0 < self.view_angle_deg <= 360), ("out_of_view_weight", 0 <= self.out_of_view_weight <= 1), ("dt", 0 < self.dt <= 0.1),
+            ("waypoints", self.waypoints >= 2), ("arrive_distance", self.arrive_distance > 0),
+            ("pause_probability", 0 <= self.pause_probability <= 1), ("pause_min", 0 <= self.pause_min <= self.pause_max),
+            ("respawn_after", self.respawn_after > 0), ("spawn_clearance", self.spawn_clearance >= 0),
+            ("robot_radius", self.robot_radius > 0), ("personal_space", self.personal_space > 0),
+            ("personal_space_penalty", math.isfinite(self.personal_space_penalty)),
+            ("height_min", 0 < self.height_min <= self.height_max),
+        ]
+        for name, ok in checks:
+            if not ok:
+                raise ValueError(f"NavEnvConfig.pedestrians.{name}: invalid value {getattr(self, name)!r}")
