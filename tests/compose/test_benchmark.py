@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
+from wanderland_nav import keys
 from wanderland_nav.compose import compose_config
 from wanderland_nav.benchmark import run
 
@@ -71,3 +73,62 @@ def test_bad_policy_entries_are_named(prepared_demo_scene, tmp_path):
         run(_cfg(prepared_demo_scene, tmp_path, "[{name: a, reference: expert}]", "baseline=nope"))
     with pytest.raises(ImportError, match="cannot import 'no_such_pkg.mod'"):
         run(_cfg(prepared_demo_scene, tmp_path, "[{name: a, target: 'no_such_pkg.mod:Cls'}]"))
+
+
+class GoalViewProbe:
+    """Reads the image-goal task's keys and checks what arrives (a failed check is a failed call, counted)."""
+
+    observes = (keys.RGB, keys.GOAL_IMAGE, keys.HAS_GOAL_IMAGE)
+    num_waypoints, context, image_size = 5, 2, (16, 16)
+
+    def act(self, obs):
+        assert obs[keys.HAS_GOAL_IMAGE].all() and obs[keys.GOAL_IMAGE].shape[1:] == (16, 16, 3)
+        assert obs[keys.GOAL_IMAGE].max() > 0 and obs[keys.RGB].shape[2:] == (16, 16, 3)
+        assert obs[keys.RGB].shape[1] >= 2  # at least its context of frames
+        return np.tile(np.array([[0.5, 0.0]], np.float32), (len(obs[keys.RGB]), 5, 1)).cumsum(1)
+
+
+class InstructionProbe(GoalViewProbe):
+    observes = (keys.INSTRUCTION_TOKENS,)
+
+    def act(self, obs):
+        tok = obs[keys.INSTRUCTION_TOKENS]
+        texts = [bytes((t[t > 0] - 1).tolist()).decode("utf-8") for t in tok]
+        assert all(len(t.split()) >= 3 for t in texts)
+        return np.zeros((len(tok), 5, 2), np.float32)
+
+
+def test_image_goal_and_instruction_tasks_deliver_their_goal_and_a_checkpoint_runs_where_it_fits(
+        prepared_demo_scene, demo_episodes, tmp_path):
+    from policies import make_policy
+    from wanderland_nav.rl.checkpoint import save_checkpoint
+
+    small = dict(name="instruction", image_size=[16, 16], dim=16, depth=1, heads=2, text_layers=1, max_tokens=16)
+    policy = make_policy("instruction", **{k: v for k, v in small.items() if k != "name"})
+    ckpt = save_checkpoint(tmp_path / "ckpt.pt", policy=policy, optimizer=None, counters={},
+                           config={"policy": small, "env": {"termination": {"max_steps": 60}}})
+    pol = ("[{name: view, target: 'test_benchmark:GoalViewProbe'}, {name: words, target: 'test_benchmark:InstructionProbe'},"
+           f" {{name: trained, checkpoint: '{ckpt}'}}]")
+    res = run(_cfg(prepared_demo_scene, tmp_path / "out", pol, "baseline=trained", "env.termination.max_steps=20"))
+    assert set(res["results"]) == {("imagegoal", "view"), ("instruction", "words"), ("instruction", "trained")}
+    for recs in res["results"].values():
+        assert len(recs) == 4 and all(r["policy_error"] == "" for r in recs)
+    assert "instruction/words - instruction/trained" in res["table"]
+    assert any("pointgoal/trained: not run, it reads ['instruction_tokens']" in s for s in res["skipped"])
+
+
+def test_a_served_policy_runs_like_the_same_policy_in_process(prepared_demo_scene, demo_episodes, tmp_path):
+    import threading
+
+    from wanderland_nav.external.examples import GoalVectorPolicy
+    from wanderland_nav.external.server import PolicyServer
+
+    server = PolicyServer(GoalVectorPolicy())
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        pol = f"[{{name: local, target: '{GOAL}'}}, {{name: remote, url: '{server.url}'}}]"
+        res = run(_cfg(prepared_demo_scene, tmp_path, pol, "tasks=[pointgoal]"))
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert res["results"][("pointgoal", "remote")] == res["results"][("pointgoal", "local")]
