@@ -8,7 +8,7 @@ Every policy runs every task whose observations cover what it reads (`wanderland
 listed as not run, with the keys that kept them out. Prints one NE / SR / SPL / IR table with 95 % intervals
 (rows `task/policy`, `task/policy/indoor|outdoor`, and paired differences against `baseline`) and writes
 `table.txt`, `results.csv`, `timing.json` and one `runs/<task>/<policy>.json` per evaluation to `out`; a rerun
-reuses the evaluations whose inputs are unchanged. The protocol: docs/benchmark.md.
+reuses the evaluations whose inputs are unchanged. The protocol: docs/guide/benchmark.md.
 """
 
 from __future__ import annotations
