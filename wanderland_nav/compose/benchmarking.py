@@ -22,7 +22,7 @@ from omegaconf import OmegaConf
 
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-from wanderland_nav.cache import json_digest
+from wanderland_nav.cache import file_sha256, json_digest
 from wanderland_nav.compose.build import (blind_env_config, env_factory, load_navmesh, policy_from_checkpoint,
                                           scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.comparison import stored_env_config
@@ -55,6 +55,8 @@ class Entry:
     actor: Any = None            # checkpoint / target / url: one actor for every task
     env_config: Any = None       # checkpoint: the env it was trained in
     image_size: Any = None
+    trained_goal_input: str = ""  # checkpoint: the point-goal input it was trained with
+    content: str = ""            # checkpoint: the file's digest (part of each evaluation's key)
 
 
 def policy_entries(c: BenchmarkConfig) -> list[Entry]:
@@ -83,7 +85,8 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
             conf = ckpt.get("config") or {}
             env_cfg = stored_env_config(conf, spec["checkpoint"])
             size = (conf.get("render") or {}).get("image_size")
-            out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), env_cfg, size))
+            out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), env_cfg, size,
+                             str(conf.get("goal_input") or "goal"), file_sha256(spec["checkpoint"])))
             continue
         inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else RemotePolicy(spec["url"], timeout)
         actor = ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
@@ -134,7 +137,7 @@ def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, nav
 
 def run_key(entry: Entry, task, c: BenchmarkConfig, scene_part: dict) -> str:
     """What one stored evaluation depends on, hashed."""
-    return json_digest({"policy": entry.spec, "task": dataclasses.asdict(task), "env": dataclasses.asdict(c.env),
+    return json_digest({"policy": entry.spec, "content": entry.content, "task": dataclasses.asdict(task), "env": dataclasses.asdict(c.env),
                         "scene": scene_part, "split": c.split, "seed": c.seed, "num_episodes": c.num_episodes,
                         "image_size": list(c.image_size), "lod_px": c.lod_px, "batch_size": c.batch_size})
 
@@ -189,7 +192,7 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     scene, episodes = scene_episodes(scene, c.episodes, num=c.demo_episodes, seed=c.seed,
                                      generator=GeneratorSettings(goal_images=False))
     scene_part, navmesh = scene_identity(scene.root, episodes), load_navmesh(scene)
-    results, seconds, skipped = {}, {}, []
+    results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
     for task in tasks:
         for entry in entries:
             bad = hidden_reads(task, entry.reads)
@@ -197,6 +200,10 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
                 skipped.append(f"{task.label}/{entry.name}: not run, it reads {bad}, which {task.name} hides")
                 continue
             check_reads(task, entry.reads, entry.name)
+            if task.name == "pointgoal" and entry.trained_goal_input and entry.trained_goal_input != task.goal_input \
+                    and {keys.GOAL_VECTOR, keys.GOAL_POSE} & set(entry.reads):
+                skipped.append(f"{task.label}/{entry.name}: trained with goal_input={entry.trained_goal_input}, "
+                               f"evaluated with goal_input={task.goal_input} (pointgoal_input)")
             key = run_key(entry, task, c, scene_part)
             path = out / "runs" / task.label / f"{entry.name}.json"
             stored = json.loads(path.read_text()) if path.is_file() else {}
