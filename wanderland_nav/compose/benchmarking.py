@@ -139,7 +139,9 @@ def run_key(entry: Entry, task, c: BenchmarkConfig, scene_part: dict) -> str:
     """What one stored evaluation depends on, hashed."""
     return json_digest({"policy": entry.spec, "content": entry.content, "task": dataclasses.asdict(task), "env": dataclasses.asdict(c.env),
                         "scene": scene_part, "split": c.split, "seed": c.seed, "num_episodes": c.num_episodes,
-                        "image_size": list(c.image_size), "lod_px": c.lod_px, "batch_size": c.batch_size})
+                        "image_size": list(c.image_size), "lod_px": c.lod_px, "batch_size": c.batch_size,
+                        "route_lookahead": c.route_lookahead, "timeout_s": c.timeout_s,
+                        "max_consecutive_failures": c.max_consecutive_failures})
 
 
 def grouped_rows(results: dict) -> dict[str, list[dict]]:
