@@ -1,6 +1,6 @@
 """Navigation policies behind one contract (see `policies.base`).
 
-`make_policy(name, **kwargs)` builds one by name: "cnn", "citywalker", "nomad", "mbra"; kwargs are the
+`make_policy(name, **kwargs)` builds one by name: "cnn", "citywalker", "nomad", "mbra", "instruction"; kwargs are the
 fields of that policy's config dataclass (`policies/<name>/config.py`).
 """
 
@@ -10,7 +10,7 @@ import dataclasses
 
 from policies.base import NavPolicy, WaypointNormal
 
-POLICY_NAMES = ("cnn", "citywalker", "nomad", "mbra")
+POLICY_NAMES = ("cnn", "citywalker", "nomad", "mbra", "instruction")
 
 
 def _classes(name: str):
@@ -22,6 +22,8 @@ def _classes(name: str):
         from policies.nomad import NoMaDConfig as Cfg, NoMaDPolicy as Pol
     elif name == "mbra":
         from policies.mbra import MBRAConfig as Cfg, MBRAPolicy as Pol
+    elif name == "instruction":
+        from policies.instruction import InstructionConfig as Cfg, InstructionPolicy as Pol
     else:
         raise ValueError(f"unknown policy {name!r}; expected one of {POLICY_NAMES}")
     return Cfg, Pol

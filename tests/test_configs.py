@@ -137,7 +137,8 @@ def test_typos_and_wrong_types_fail_at_compose_time_with_the_key_named(primary):
 
     from wanderland_nav.compose import SCHEMAS, typed_config
 
-    wrong_key = {"replay": "max_points", "recon_eval": "max_time_diff", "study": "source.demo_seed"}.get(
+    wrong_key = {"replay": "max_points", "recon_eval": "max_time_diff", "study": "source.demo_seed",
+                 "serve_policy": "port"}.get(
         primary, "scene.seed")  # no scene group
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         typo = compose(primary, overrides=["+seeed=1"])

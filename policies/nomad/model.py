@@ -88,6 +88,9 @@ class NoMaDPolicy(NavPolicy):
     config_class = NoMaDConfig
 
     def build(self, cfg: NoMaDConfig) -> None:
+        if not cfg.use_goal_vector:  # released NoMaD: no goal coordinates read, so it fits the image-goal task
+            self.obs_keys = tuple(k for k in self.obs_keys if k != K.GOAL_VECTOR)
+            self.in_keys = list(self.obs_keys)
         self.obs_encoder = SmallCNN(cfg.dim)
         self.goal_encoder = SmallCNN(cfg.dim, in_channels=6)
         n_tok = cfg.context + 1 + int(cfg.use_goal_vector)

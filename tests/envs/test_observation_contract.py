@@ -16,6 +16,7 @@ TINY = {  # small enough for milliseconds per step
     "citywalker": dict(encoder="cnn", image_size=(16, 16), dim=16, depth=1, heads=2),
     "nomad": dict(image_size=(16, 16), dim=16, depth=1, heads=2, unet_hidden=16, use_goal_vector=True),
     "mbra": dict(image_size=(16, 16), dim=16, depth=1, heads=2),
+    "instruction": dict(image_size=(16, 16), dim=16, depth=1, heads=2, text_layers=1, max_tokens=32),
 }
 
 

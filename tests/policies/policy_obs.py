@@ -13,6 +13,7 @@ TINY = {
     "citywalker": dict(encoder="cnn", image_size=(32, 32), dim=32, depth=1, heads=2),
     "nomad": dict(image_size=(32, 32), dim=32, depth=1, heads=2, unet_hidden=16, use_goal_vector=True),
     "mbra": dict(image_size=(32, 32), dim=32, depth=1, heads=2),
+    "instruction": dict(image_size=(32, 32), dim=32, depth=1, heads=2, text_layers=1, max_tokens=24),
 }
 
 
@@ -28,6 +29,8 @@ def make_obs(batch=(3,), T=5, H=32, seed=0) -> TensorDict:
         K.GOAL_POSE: torch.cat([torch.randn(*b, 2, generator=g) * 4, torch.ones(*b, 1), torch.zeros(*b, 1)], -1),
         K.GOAL_IMAGE: torch.randint(0, 256, (*b, H, H, 3), generator=g, dtype=torch.uint8),
         K.HAS_GOAL_IMAGE: has_goal,
+        # UTF-8 bytes + 1 of "go left", then padding (0)
+        K.INSTRUCTION_TOKENS: torch.tensor([*(c + 1 for c in b"go left"), *[0] * 25]).expand(*b, 32).clone(),
     }, list(b))
 
 

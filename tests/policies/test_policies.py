@@ -39,7 +39,7 @@ def test_forward_shapes_any_leading_dims(name, batch):
         assert td[K.ARRIVAL_LOGIT].shape == (*batch, 1)
 
 
-@pytest.mark.parametrize("name", ["cnn", "citywalker", "mbra"])   # NoMaD's prior is its random denoiser's
+@pytest.mark.parametrize("name", ["cnn", "citywalker", "mbra", "instruction"])   # NoMaD's prior is its random denoiser's
 def test_untrained_prior_walks_forward(name):
     """Zero-initialised heads give a straight walk at the waypoint spacing: a sane untrained policy."""
     p = build(name)

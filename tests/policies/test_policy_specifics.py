@@ -171,3 +171,23 @@ def test_citywalker_with_vit_encoder_runs():
     td = p(make_obs((2,)))
     assert td[K.WAYPOINTS].shape == (2, 5, 2)
     assert not any(q.requires_grad for q in p.encoder.parameters())
+
+
+def test_instruction_policy_reads_the_text_up_to_max_tokens_and_no_goal():
+    """The instruction changes the features; bytes past `max_tokens` do not; no goal coordinates are read."""
+    from policies.instruction import InstructionPolicy
+
+    torch.manual_seed(0)
+    p = InstructionPolicy(image_size=(32, 32), dim=32, depth=1, heads=2, text_layers=1, max_tokens=24)
+    assert set(p.in_keys) == {K.RGB, K.PAST_POSITIONS, K.INSTRUCTION_TOKENS}
+    obs = make_obs()
+    base = p.value_features(obs)
+    other = obs.clone()
+    other[K.INSTRUCTION_TOKENS][:, :7] = torch.tensor([c + 1 for c in b"go righ"])
+    assert not torch.allclose(p.value_features(other), base)
+    tail = obs.clone()
+    tail[K.INSTRUCTION_TOKENS][:, 24:] = 77  # beyond max_tokens
+    assert torch.allclose(p.value_features(tail), base)
+    empty = obs.clone()
+    empty[K.INSTRUCTION_TOKENS].zero_()  # no text at all: defined, finite features
+    assert torch.isfinite(p.value_features(empty)).all()

@@ -386,10 +386,46 @@ class MakeEnvConfig:
     episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
     render: RenderSettings = field(default_factory=RenderSettings)
 
+# ------------------------------------------------------------------------------ benchmark / serve_policy
+@dataclass
+class BenchmarkConfig:
+    scene: SceneGroup = field(default_factory=SceneGroup)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    tasks: List[str] = field(default_factory=lambda: ["pointgoal", "imagegoal", "instruction"])
+    pointgoal_input: str = "goal"        # goal: the final goal's vector | route: the route point ahead (CityWalker)
+    route_lookahead: float = 3.0
+    policies: List[Any] = field(default_factory=list)  # [{name, reference|checkpoint|target|url, ...}]
+    baseline: Optional[str] = None       # the policy the paired differences are against (null: the first)
+    episodes: Optional[str] = None
+    demo_episodes: int = at_least(1, 60)
+    split: Optional[str] = None
+    num_episodes: Optional[int] = at_least(1, None)
+    batch_size: int = at_least(1, 8)
+    image_size: List[int] = field(default_factory=lambda: [64, 64])  # camera of a policy that names no size
+    lod_px: Optional[float] = 1.0
+    timeout_s: float = 30.0
+    max_consecutive_failures: int = at_least(1, 3)
+    device: str = "cpu"
+    seed: int = 0
+    out: Optional[str] = None
+    progress: bool = True
+
+
+@dataclass
+class ServePolicyConfig:
+    target: Optional[str] = None         # pkg.module:Class (a protocol policy, wanderland_nav.external.protocol)
+    kwargs: Dict[str, Any] = field(default_factory=dict)
+    checkpoint: Optional[str] = None     # or a trained checkpoint of a package policy
+    host: str = "127.0.0.1"
+    port: int = at_least(0, 8765)        # 0: a free port (the printed url says which)
+    device: str = "cpu"
+
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,
            "replay": ReplayConfig, "fit": FitRunConfig, "recon_eval": ReconEvalConfig,
-           "export_usd": ExportUsdConfig, "study": StudyConfig, "make_env": MakeEnvConfig}
+           "export_usd": ExportUsdConfig, "study": StudyConfig, "make_env": MakeEnvConfig,
+           "benchmark": BenchmarkConfig, "serve_policy": ServePolicyConfig}
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):

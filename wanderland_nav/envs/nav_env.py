@@ -222,6 +222,11 @@ class NavEnv(EnvBase):
             has = torch.zeros(E, dtype=torch.bool)
         self._goal_images, self._has_goal_image = imgs.to(self.device), has.to(self.device)
 
+    @property
+    def goal_view_mask(self) -> torch.Tensor:
+        """bool `[E]`: which episodes have a goal view (read by the image-goal task's checks)."""
+        return self._has_goal_image
+
     def _make_specs(self) -> None:
         B, c, k = self.batch_size, self.config.camera, self.config.kinematics
         T, H, W, L = c.history, c.height, c.width, self.config.instruction_length

@@ -1,0 +1,47 @@
+"""Serve a policy over HTTP on a local address (the reference server of the bring-your-own-policy protocol).
+
+    python -m wanderland_nav.serve_policy target=my_pkg.my_module:MyPolicy [port=8765]
+    python -m wanderland_nav.serve_policy checkpoint=outputs/.../checkpoints/last.pt
+
+Prints `serving <policy> at http://127.0.0.1:<port>` once it accepts requests (`port=0`: a free port) and serves
+until stopped. The evaluator reaches it with `policies=[{name: ..., url: http://127.0.0.1:<port>}]`.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from omegaconf import DictConfig
+
+from wanderland_nav.compose import policy_from_checkpoint, typed_config
+from wanderland_nav.compose.schema import ServePolicyConfig
+from wanderland_nav.external.actor import NavPolicyAsExternal
+from wanderland_nav.external.protocol import load_target
+from wanderland_nav.external.server import PolicyServer
+
+
+def make_server(cfg: DictConfig) -> PolicyServer:
+    """The bound (not yet serving) server of the composed config."""
+    c: ServePolicyConfig = typed_config(cfg, ServePolicyConfig)
+    if bool(c.target) == bool(c.checkpoint):
+        raise ValueError("serve_policy: give exactly one of target=pkg.mod:Class or checkpoint=<file.pt>")
+    policy = load_target(c.target, c.kwargs) if c.target else NavPolicyAsExternal(policy_from_checkpoint(c.checkpoint,
+                                                                                                         c.device)[0])
+    return PolicyServer(policy, c.host, c.port)
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="serve_policy")
+def main(cfg: DictConfig) -> None:
+    server = make_server(cfg)
+    print(f"serving {type(server.policy).__name__} at {server.url}", flush=True)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+
+
+if __name__ == "__main__":
+    main()
