@@ -6,7 +6,9 @@ import logging
 import time
 from pathlib import Path
 
+from planners import NavMesh
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
+from wanderland_nav.episodes.generate import write_scene_episodes
 from wanderland_nav.scene import load_scene, make_demo_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
 from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
@@ -58,9 +60,6 @@ def scene_episodes(scene, path: str | None, *, num: int, seed: int, generator) -
         return scene, Path(path)
     if scene.episodes_path is not None and Path(scene.episodes_path).is_file():
         return scene, Path(scene.episodes_path)
-    from planners import NavMesh
-    from wanderland_nav.episodes.generate import write_scene_episodes
-
     if scene.navmesh_path is None:
         raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
                                 f"(python -m wanderland_nav.prepare scene={scene.root})")
