@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import os
 
+from wanderland_nav.gsfit.run import fit_scene
+
 # Before torch (and its OpenMP runtime) loads: threads that spin while waiting burn the CPU other
 # processes need on a shared machine; on the 2-core dev box (load ~15) a 48 px render took 12 s
 # wall with spinning and 0.08 s with passive waiting. Users can still set the variable themselves.
@@ -31,8 +33,6 @@ from wanderland_nav.compose.schema import FitRunConfig  # noqa: E402
 
 def run_fit(cfg) -> dict:
     """Everything `main` does, on a composed config or a plain dict (tests)."""
-    from wanderland_nav.gsfit.run import fit_scene
-
     c: FitRunConfig = typed_config(cfg, FitRunConfig)
     config = OmegaConf.to_container(OmegaConf.create(cfg), resolve=True)
     scene, out_dir, identity, lpips, scalar_logger = fit_parts(c, config)
