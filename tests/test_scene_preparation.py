@@ -116,9 +116,9 @@ class _FakeNavMesh:
 
 
 def test_navmesh_rebakes_only_when_needed(demo_copy, monkeypatch):
-    import planners
+    import wanderland_nav.scene_preparation as preparation
 
-    monkeypatch.setattr(planners, "NavMesh", _FakeNavMesh, raising=False)
+    monkeypatch.setattr(preparation, "NavMesh", _FakeNavMesh)
     _FakeNavMesh.bakes = 0
     s = prepare_scene(demo_copy, collision=FAST)
     assert _FakeNavMesh.bakes == 1 and s.navmesh_path.is_file()
@@ -179,6 +179,6 @@ def test_a_navmesh_baked_for_another_up_axis_is_refused_where_the_scene_is_prepa
     with pytest.raises(WanderlandInputError, match=msg):
         check_navmesh_frame(wrong)
     with pytest.raises(WanderlandInputError, match=msg):  # the artefacts taken as they are (prepare=false)
-        prepared_scene(SceneGroup(path=str(root), up_axis="+z"), NavigationGroup(prepare=False))
+        prepared_scene(SceneGroup(path=str(root), demo=False, up_axis="+z"), NavigationGroup(prepare=False))
     with pytest.raises(WanderlandInputError, match=msg):  # prepare without a bake
         prepare_scene(root, up_axis="+z", bake_navmesh=False, collision=CollisionSettings(voxel_size=0.25))

@@ -21,7 +21,7 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose import scene_overrides, typed_config
 from wanderland_nav.compose.benchmarking import run_benchmark
-from wanderland_nav.compose.cli import hydra_output_dir
+from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
 from wanderland_nav.compose.schema import BenchmarkConfig
 
 
@@ -35,11 +35,16 @@ def run(cfg: DictConfig) -> dict:
     return res
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="benchmark")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="benchmark")
+def hydra_main(cfg: DictConfig) -> None:
     run(cfg)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """`wanderland-benchmark` and `python -m wanderland_nav.benchmark`: the command line, then Hydra."""
     sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
+    hydra_main()
+
+
+if __name__ == "__main__":
     main()

@@ -12,8 +12,13 @@ catches any unreadable input, and `.path` / `.field` say where to look without p
 from __future__ import annotations
 
 import os
+import pickle
+import re
+import zipfile
 from pathlib import Path
 from typing import Any
+
+import torch
 
 
 class WanderlandInputError(ValueError):
@@ -47,12 +52,6 @@ def torch_load(path: str | os.PathLike, *, what: str, map_location: Any = "cpu")
     no file, and a run that reads several checkpoints cannot say which one is broken. Never
     `weights_only=False`: a `.pt` is a pickle, and checkpoints are passed between people.
     """
-    import pickle
-    import re
-    import zipfile
-
-    import torch
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{what} not found: {path}")

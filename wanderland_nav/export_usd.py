@@ -15,12 +15,11 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose import CONF_DIR, prepared_scene, scene_overrides, typed_config
 from wanderland_nav.compose.schema import ExportUsdConfig
+from wanderland_nav.usd import UsdExportSettings, export_scene_usd
 
 
 def run(cfg: DictConfig) -> dict:
     """Everything `main` does (tests call it with a composed config). Returns the export summary."""
-    from wanderland_nav.usd import UsdExportSettings, export_scene_usd
-
     c: ExportUsdConfig = typed_config(cfg, ExportUsdConfig)
     scene = prepared_scene(c.scene, c.navigation)
     out = Path(to_absolute_path(c.out)) if c.out else scene.root / "scene.usda"

@@ -20,12 +20,11 @@ from omegaconf import DictConfig, OmegaConf
 from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
 from wanderland_nav.compose.fitting import fit_parts
 from wanderland_nav.compose.schema import FitRunConfig
+from wanderland_nav.gsfit.run import fit_scene
 
 
 def run_fit(cfg) -> dict:
     """Everything `main` does, on a composed config or a plain dict (tests)."""
-    from wanderland_nav.gsfit.run import fit_scene
-
     c: FitRunConfig = typed_config(cfg, FitRunConfig)
     config = OmegaConf.to_container(OmegaConf.create(cfg), resolve=True)
     scene, out_dir, identity, lpips, scalar_logger = fit_parts(c, config)

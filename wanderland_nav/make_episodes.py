@@ -19,6 +19,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 
 import hydra
+import torch
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
@@ -28,8 +29,6 @@ from wanderland_nav.compose.schema import MakeEpisodesConfig
 
 
 def _worker(args):
-    import torch
-
     torch.set_num_threads(1)  # one process per scene: no thread oversubscription
     plan, kw, position = args
     return process_scene(plan, position=position, **kw)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import multiprocessing as mp
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -24,11 +25,15 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from planners import NavMeshSettings
+import torch
+
+from planners import NavMesh, NavMeshSettings
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+from wanderland_nav.scene import make_demo_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.sets import SceneSet
+from wanderland_nav.scene_preparation import input_digests, prepare_scene, scene_inputs
 
 log = logging.getLogger(__name__)
 MANIFEST_FORMAT = 1
@@ -68,8 +73,6 @@ class SceneJob:
         folder the job itself builds from its settings. A scan replaced after the run is seen here."""
         if self.demo_seed is not None:
             return "demo"
-        from wanderland_nav.scene_preparation import input_digests, scene_inputs
-
         root = Path(self.path)
         return _digest(input_digests(root, scene_inputs(root)))
 
@@ -87,22 +90,13 @@ def _digest(d: dict) -> str:
 
 def prepare_one(job: SceneJob) -> dict:
     """Build (demo), prepare and write expert episodes for one scene; returns figures for the manifest."""
-    import torch
-
     torch.set_num_threads(1)  # one task per core: no oversubscription
     t0 = time.perf_counter()
     if job.demo_seed is not None:
-        from wanderland_nav.scene import make_demo_scene
-
         make_demo_scene(Path(job.path), seed=job.demo_seed, preset=job.demo_preset)
-    from wanderland_nav.scene_preparation import prepare_scene
-
     scene = prepare_scene(job.path, collision=job.collision, navmesh=job.navmesh, force=job.force)
     out = {"prepare_s": time.perf_counter() - t0}
     if job.expert:
-        from planners import NavMesh
-        from wanderland_nav.episodes.generate import write_scene_episodes
-
         episodes, summary = write_scene_episodes(scene, NavMesh.load(scene.navmesh_path),
                                                  scene.products / "episodes.json", num_episodes=job.num_episodes,
                                                  seed=job.seed, settings=job.generator, force=job.force)
@@ -212,8 +206,6 @@ def _run_serial(todo, fn, workers, finished) -> None:
 
 
 def _run_pool(todo, fn, workers, finished) -> None:
-    import multiprocessing as mp
-
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
         pending = {ex.submit(_guarded, fn, job): job for job in todo}
         while pending:

@@ -16,16 +16,23 @@ import sys
 from pathlib import Path
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
+from wanderland_nav.compose import SCHEMAS, typed_config
 from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
+from wanderland_nav.geometry import up_vector
+from wanderland_nav.gsfit.lpips import LPIPS
+from wanderland_nav.recon import evaluate_paths
+from wanderland_nav.recon.nvs import format_nvs, score_renders
+from wanderland_nav.recon.report import write_results
+from wanderland_nav.scene import load_scene
+from wanderland_nav.viz.recon_plot import plot_trajectories
+from wanderland_nav.viz.rerun_recon import write_recon_recording
 
 
 def run(cfg: dict) -> dict:
     """Everything `main` does, on a plain dict (tests call it without Hydra). Returns what was written."""
-    from wanderland_nav.recon import evaluate_paths
-    from wanderland_nav.recon.report import write_results
-
     if cfg.get("gt") is None or (cfg.get("pred") is None and cfg.get("nvs") is None):
         raise ValueError("recon_eval needs gt=<path> and pred=<path> (poses) and/or nvs=<renders folder> (images)")
     out = Path(cfg["out"]) if cfg.get("out") else _hydra_output_dir()
@@ -46,14 +53,9 @@ def run(cfg: dict) -> dict:
 
 
 def _score_nvs(cfg: dict) -> dict:
-    from wanderland_nav.recon.nvs import format_nvs, score_renders
-    from wanderland_nav.scene import load_scene
-
     lpips = None
     lp = cfg.get("lpips") or {}
     if lp.get("backbone_path") and lp.get("lin_path"):
-        from wanderland_nav.gsfit.lpips import LPIPS
-
         lpips = LPIPS.from_files(lp["backbone_path"], lp["lin_path"])
     res = score_renders(load_scene(cfg["gt"]), cfg["nvs"], split=str(cfg["nvs_split"]),
                         holdout_every=int(cfg["nvs_holdout_every"]), downscale=float(cfg["nvs_downscale"]), lpips=lpips)
@@ -64,25 +66,18 @@ def _score_nvs(cfg: dict) -> dict:
 def _draw(out: Path, bench, *, plot: bool, rerun: bool) -> list[Path]:
     written = []
     if plot:
-        from wanderland_nav.geometry import up_vector
-        from wanderland_nav.viz.recon_plot import plot_trajectories
-
         for r in bench.results:
             up = up_vector(r.up_axis) if r.up_axis else None
             title = f"{r.name}: T-ATE^S {r.metrics['t_ate_sim3']:.3f} m, {r.metrics['matched']} cameras"
             written.append(plot_trajectories(out / f"traj_{Path(r.name).stem}.png", r.gt_centers,
                                              r.pred_centers_sim3, up=up, title=title))
     if rerun:
-        from wanderland_nav.viz.rerun_recon import write_recon_recording
-
         write_recon_recording(out / "recon_eval.rrd", bench.results)
         written.append(out / "recon_eval.rrd")
     return written
 
 
 def _hydra_output_dir() -> Path:
-    from hydra.core.hydra_config import HydraConfig
-
     try:
         return Path(HydraConfig.get().runtime.output_dir)
     except ValueError:  # composed without Hydra's runtime (tests): current folder
@@ -91,8 +86,6 @@ def _hydra_output_dir() -> Path:
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="recon_eval")
 def hydra_main(cfg: DictConfig) -> None:
-    from wanderland_nav.compose import SCHEMAS, typed_config
-
     typed_config(cfg, SCHEMAS["recon_eval"])  # a typo or a wrong type fails here, with the key named
     run(OmegaConf.to_container(cfg, resolve=True))
 

@@ -21,15 +21,14 @@ import hydra
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import CONF_DIR, typed_config
+from wanderland_nav.compose.cli import quote_overrides
 from wanderland_nav.compose.replaying import replay_frames, replay_inputs
 from wanderland_nav.compose.schema import ReplayConfig
-from wanderland_nav.compose.cli import quote_overrides
+from wanderland_nav.viz.recording import open_viewer, write_recording
 
 
 def run(cfg: DictConfig) -> dict:
     """Everything `main` does, callable with a composed config (tests). Returns the logged counts + `out`."""
-    from wanderland_nav.viz.recording import open_viewer, write_recording
-
     t0 = time.perf_counter()
     c: ReplayConfig = typed_config(cfg, ReplayConfig)
     rollout, scene, episodes, src = replay_inputs(c)

@@ -13,6 +13,7 @@ CLI: `python -m wanderland_nav.report multirun/citywalker_rl/*/results.json` (on
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -203,8 +204,6 @@ def load_seed_runs(paths: Sequence[Path]) -> dict[str, list[list[dict]]]:
 
 def main(argv: Sequence[str] | None = None) -> str:
     """`python -m wanderland_nav.report results.json ... [--baseline BC]`: the multi-seed table."""
-    import argparse
-
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument("results", nargs="+", type=Path, help="one train results.json per seed")
     ap.add_argument("--baseline", default=None, help="row to difference against (default: the first)")

@@ -20,10 +20,12 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from planners import NavMesh, NavMeshSettings
 from wanderland_nav.atomic import atomic_path, atomic_write_json
 from wanderland_nav.cache import file_sha256, json_digest, read_record
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import parse_up_axis
+from wanderland_nav.scene import make_demo_scene
 from wanderland_nav.scene.checks import EmptyNavMeshError, check_up_axis, empty_navmesh_reasons
 from wanderland_nav.scene.collision import (CollisionSettings, crop_mesh_to_trajectory, extract_collision_mesh,
                                             load_collision_mesh)
@@ -129,8 +131,6 @@ def build_collision_mesh(scene: Scene, settings: CollisionSettings, *, force: bo
 
 def build_navmesh(scene: Scene, navmesh_settings, *, force: bool = False) -> tuple[Path, dict]:
     """Bake `navmesh.npz` from `collision_mesh.ply` with `planners.NavMesh` unless up to date."""
-    from planners import NavMesh, NavMeshSettings  # planners depends on scene, never the reverse
-
     settings = navmesh_settings if navmesh_settings is not None else NavMeshSettings(up_axis=scene.up_axis)
     if settings.up_axis != scene.up_axis:
         log.info("navmesh up_axis %s replaced by the scene's %s (%s)", settings.up_axis, scene.up_axis,
@@ -213,7 +213,5 @@ def prepare_scene(path, *, force: bool = False, collision: CollisionSettings = C
 
 def ensure_demo_scene(path, seed: int = 0, preset: str = "default", **prepare_kwargs) -> Scene:
     """Make the procedural demo scene at `path` if missing (idempotent), then prepare it."""
-    from wanderland_nav.scene import make_demo_scene
-
     make_demo_scene(Path(path), seed=seed, preset=preset)
     return prepare_scene(path, **prepare_kwargs)

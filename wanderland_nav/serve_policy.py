@@ -15,6 +15,7 @@ import hydra
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import policy_from_checkpoint, typed_config
+from wanderland_nav.compose.cli import CONF_DIR
 from wanderland_nav.compose.schema import ServePolicyConfig
 from wanderland_nav.external.actor import NavPolicyAsExternal
 from wanderland_nav.external.protocol import load_target
@@ -31,8 +32,8 @@ def make_server(cfg: DictConfig) -> PolicyServer:
     return PolicyServer(policy, c.host, c.port)
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="serve_policy")
-def main(cfg: DictConfig) -> None:
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="serve_policy")
+def hydra_main(cfg: DictConfig) -> None:
     server = make_server(cfg)
     print(f"serving {type(server.policy).__name__} at {server.url}", flush=True)
     try:
@@ -41,6 +42,11 @@ def main(cfg: DictConfig) -> None:
         pass
     finally:
         server.server_close()
+
+
+def main() -> None:
+    """`wanderland-serve-policy` and `python -m wanderland_nav.serve_policy`: the command line, then Hydra."""
+    hydra_main()
 
 
 if __name__ == "__main__":

@@ -21,7 +21,8 @@ import torch
 from omegaconf import DictConfig
 
 from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
-from wanderland_nav.compose.study_config import StudyConfig, study_config
+from wanderland_nav.compose.schema import study_config
+from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.grounding_study.cells import StudyCells
 from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
 from wanderland_nav.grounding_study.report import write_study_outputs

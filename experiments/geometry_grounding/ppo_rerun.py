@@ -31,7 +31,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.compose.cli import compose_config
-from wanderland_nav.compose.study_config import study_config
+from wanderland_nav.compose.schema import study_config
 from wanderland_nav.grounding_study.cells import StudyCells
 from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells
 from wanderland_nav.report import seed_table

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
+from wanderland_nav.compose.schema import study_config
+from wanderland_nav.compose.study_config import StudyConfig, StudyGroup
 from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
                                               unpaired_difference)
 from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, cell_inputs, plan_cells, run_cells

@@ -13,7 +13,8 @@ import pytest
 import yaml
 from omegaconf import OmegaConf
 
-from wanderland_nav.compose.study_config import StudyConfig, StudyGroup, study_config
+from wanderland_nav.compose.schema import study_config
+from wanderland_nav.compose.study_config import StudyConfig, StudyGroup
 from wanderland_nav.degrade.crosseval import table3
 from wanderland_nav.grounding_study.cells import StudyCells
 from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, plan_cells

@@ -7,8 +7,17 @@ import dataclasses
 from functools import partial
 from pathlib import Path
 
+from planners import NavMesh
+from policies import make_policy, policy_config
 from wanderland_nav import keys
 from wanderland_nav.envs.config import NavEnvConfig
+from wanderland_nav.envs.episode_table import load_goal_images
+from wanderland_nav.envs.factory import make_nav_env
+from wanderland_nav.episodes import load_episodes
+from wanderland_nav.render.lod import load_splat
+from wanderland_nav.rl.checkpoint import load_checkpoint
+from wanderland_nav.rl.loggers import ConsoleCSVLogger
+from wanderland_nav.viz import RerunLogger
 
 
 def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfig:
@@ -40,8 +49,6 @@ def scene_gaussians(scene, lod_px: float | None, *, needed: bool = True):
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
                                 "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
                                 "turn the camera off (env.camera.enabled=false)")
-    from wanderland_nav.render.lod import load_splat
-
     return load_splat(path, lod_px)
 
 
@@ -49,9 +56,6 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
                 navmesh, gaussians):
     """A picklable `() -> NavEnv` over loaded parts (collector workers call it). `episodes_path`: one file, or
     several whose `split` episodes are joined (the first file's ids kept, the others' prefixed with their stem)."""
-    from wanderland_nav.envs.factory import make_nav_env
-    from wanderland_nav.episodes import load_episodes
-
     split = split if split is not None else env_cfg.split
     paths = [Path(episodes_path)] if isinstance(episodes_path, (str, Path)) else [Path(p) for p in episodes_path]
     where = " + ".join(str(p) for p in paths)  # the file(s) an error names
@@ -63,8 +67,6 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
         raise ValueError(f"{where}: no episodes in split {split!r}")
     goal_images = None
     if env_cfg.goal_image == "auto":  # the files the episodes name, beside the episodes file or the scene
-        from wanderland_nav.envs.episode_table import load_goal_images
-
         goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, scene.products, Path(scene.root)], env_cfg.camera.height,
                                        env_cfg.camera.width, where=where)
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
@@ -72,8 +74,6 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
 
 
 def load_navmesh(scene):
-    from planners import NavMesh
-
     if scene.navmesh_path is None or not Path(scene.navmesh_path).is_file():
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): navmesh.npz missing; prepare the scene first "
                                 f"(python -m wanderland_nav.prepare scene={scene.root})")
@@ -82,13 +82,9 @@ def load_navmesh(scene):
 
 def make_logger(logger_cfg, run_dir: Path, scene=None):
     """`logger.kind`: console (+ metrics.csv) or rerun (`<run_dir>/rerun.rrd`, with the scene as context)."""
-    from wanderland_nav.rl.loggers import ConsoleCSVLogger
-
     if logger_cfg.kind in ("console", "csv"):
         return ConsoleCSVLogger(run_dir, print_every=logger_cfg.print_every)
     if logger_cfg.kind == "rerun":
-        from wanderland_nav.viz import RerunLogger
-
         return RerunLogger(run_dir, rollout_every=logger_cfg.rollout_every, max_agents=logger_cfg.max_agents,
                            spawn=logger_cfg.spawn, scene=scene)
     raise ValueError(f"logger.kind={logger_cfg.kind!r}: expected console or rerun")
@@ -96,8 +92,6 @@ def make_logger(logger_cfg, run_dir: Path, scene=None):
 
 def check_policy_config(policy_cfg: dict):
     """The `policy` group validated without building the model (a typo fails before the scene is prepared)."""
-    from policies import policy_config
-
     kw = dict(policy_cfg)
     if "name" not in kw:
         raise ValueError("policy: no `name` (conf/policy/<name>.yaml)")
@@ -105,8 +99,6 @@ def check_policy_config(policy_cfg: dict):
 
 
 def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
-    from policies import make_policy
-
     check_policy_config(policy_cfg)
     kw = dict(policy_cfg)
     return make_policy(kw.pop("name"), **kw).to(device)
@@ -114,8 +106,6 @@ def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
 
 def policy_from_checkpoint(path, device: str = "cpu"):
     """Rebuild the policy a training checkpoint was made with (its stored config) and load its weights."""
-    from wanderland_nav.rl.checkpoint import load_checkpoint
-
     ckpt = load_checkpoint(path)
     pol = (ckpt.get("config") or {}).get("policy") or {}
     if "name" not in pol:

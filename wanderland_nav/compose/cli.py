@@ -17,6 +17,8 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import OverrideParseException
 from omegaconf import OmegaConf
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the package's link to the repository's conf/, shipped in the wheel
@@ -34,9 +36,6 @@ def hydra_quoted(value: str) -> str:
 def quote_overrides(argv: list[str]) -> list[str]:
     """Each `key=value` (flags such as `--multirun` pass as they are) Hydra's lexer cannot read is passed quoted (`key='value'`) when that reads back as
     exactly `value`; otherwise a ValueError says how to quote it."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import OverrideParseException
-
     parser = OverridesParser.create()
 
     def reads(override: str) -> str | None:  # None when Hydra parses it, else its first error line

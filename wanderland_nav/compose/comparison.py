@@ -11,6 +11,7 @@ from pathlib import Path
 
 from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
 from wanderland_nav.compose.scene_sets import scene_env_fn
+from wanderland_nav.compose.schema import typed_config
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
 from wanderland_nav.report import comparison_table
@@ -29,8 +30,6 @@ def checkpoint_label(path: Path) -> str:
 
 def stored_env_config(conf: dict, path) -> NavEnvConfig:
     """The env config a checkpoint was trained with, through the same schema as `train` (strict)."""
-    from wanderland_nav.compose.schema import typed_config
-
     try:
         return typed_config(conf.get("env") or {}, NavEnvConfig)
     except Exception as e:  # an older checkpoint with keys this version no longer has

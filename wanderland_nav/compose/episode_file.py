@@ -13,12 +13,18 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import numpy as np
+import torch
+
+from planners import NavMesh
+from wanderland_nav.episodes import load_episodes
+from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+from wanderland_nav.episodes.schema import load_episode_file
+
 log = logging.getLogger(__name__)
 
 
 def split_counts(path: Path) -> dict[str, int]:
-    from wanderland_nav.episodes.schema import load_episode_file
-
     eps = load_episode_file(path).episodes
     return {s: sum(e.split == s for e in eps)
             for s in ("train", "val", "test")}
@@ -53,9 +59,6 @@ def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int
     if scene.navmesh_path is None:
         raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
                                 f"(python -m wanderland_nav.prepare scene={scene.root})")
-    from planners import NavMesh
-    from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-
     tag = "-".join(f"{f:g}" for f in splits)
     fresh = existing is not None and not Path(existing).exists()  # no file yet: make the scene's own
     out = Path(existing) if fresh else scene.products / f"episodes_n{num}_s{seed}_{tag}.json"
@@ -82,8 +85,6 @@ def ppo_route_file(scene, base: Path, *, num: int, seed: int, base_seed: int, go
         raise ValueError(f"episodes.ppo_routes_seed={seed} equals episodes.seed: the extra PPO routes would redraw "
                          f"{base}'s endpoints, val and test among them; choose another ppo_routes_seed")
     out = episodes_for_run(scene, None, num=num, seed=seed, splits=(1.0, 0.0, 0.0), goal_images=goal_images)
-    from wanderland_nav.episodes import load_episodes
-
     held_out = [e for s in ("val", "test") for e in load_episodes(base, split=s)]
     near = _near_copies(load_episodes(out), held_out) if held_out else 0
     log.info("episodes: PPO also trains on %s (%d train-only routes, seed %d); %d of them start and end within 1 m "
@@ -93,9 +94,6 @@ def ppo_route_file(scene, base: Path, *, num: int, seed: int, base_seed: int, go
 
 def _near_copies(routes, held_out, radius: float = 1.0) -> int:
     """How many of `routes` have start and goal both within `radius` m of one held-out route's."""
-    import numpy as np
-    import torch
-
     ends = lambda eps: torch.as_tensor(np.stack([np.r_[e.start_position, e.goal_position] for e in eps]))  # noqa: E731
     a, b = ends(routes), ends(held_out)  # [E, 6], [H, 6]: start, goal (scene frame, m)
     close = (torch.cdist(a[:, :3], b[:, :3]) < radius) & (torch.cdist(a[:, 3:], b[:, 3:]) < radius)  # [E, H]

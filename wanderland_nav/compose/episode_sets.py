@@ -7,9 +7,14 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from wanderland_nav.compose.schema import MakeEpisodesConfig, NavigationGroup, SceneGroup
+from tqdm import tqdm
+
+from wanderland_nav.compose.build import load_navmesh
 from wanderland_nav.compose.scene import prepared_scene
+from wanderland_nav.compose.schema import MakeEpisodesConfig, NavigationGroup, SceneGroup
+from wanderland_nav.episodes.generate import write_scene_episodes
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
+from wanderland_nav.viz.topdown import plot_topdown
 
 
 @dataclass(frozen=True)
@@ -62,10 +67,6 @@ def resolve_scenes(c: MakeEpisodesConfig) -> list[ScenePlan]:
 def process_scene(plan: ScenePlan, *, navigation: NavigationGroup, num_episodes: int, seed: int, settings,
                   force: bool, topdown: bool, progress: bool, position: int = 0):
     """Prepare one scene, write its episodes and top-down PNG; returns the generation summary."""
-    from tqdm import tqdm
-
-    from wanderland_nav.compose.build import load_navmesh
-    from wanderland_nav.episodes.generate import write_scene_episodes
 
     scene = prepared_scene(plan.scene, navigation)
     navmesh = load_navmesh(scene)
@@ -81,8 +82,6 @@ def process_scene(plan: ScenePlan, *, navigation: NavigationGroup, num_episodes:
         bar.close()
     png = out.with_name(out.name.split(".")[0] + "_topdown.png")
     if topdown and not (summary.skipped and png.is_file()):
-        from wanderland_nav.viz.topdown import plot_topdown
-
         plot_topdown(png, nav_from_scene=scene.nav_from_scene, camera_centers=scene.capture_positions(),
                      episodes=episodes, navmesh=navmesh, seed=seed,
                      title=f"{scene.name}: {len(episodes)} episodes (seed {seed})")

@@ -13,6 +13,10 @@ from wanderland_nav.compose.identity import check_resume, run_identity, scene_id
 from wanderland_nav.compose.scene import scene_folder
 from wanderland_nav.compose.schema import FitRunConfig
 from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.gsfit.lpips import LPIPS
+from wanderland_nav.scene import load_scene
+from wanderland_nav.scene_preparation import scene_inputs
+from wanderland_nav.viz.rerun_logger import RerunLogger
 
 log = logging.getLogger("wanderland_nav.fit")
 
@@ -31,9 +35,6 @@ def fit_run_dir(c: FitRunConfig, scene_name: str, identity: dict) -> Path:
 
 def fit_parts(c: FitRunConfig, config: dict):
     """-> (scene, out_dir, identity hash, LPIPS or None, scalar logger or None)."""
-    from wanderland_nav.scene import load_scene
-    from wanderland_nav.scene_preparation import scene_inputs
-
     if c.threads:
         torch.set_num_threads(c.threads)
     scene = load_scene(scene_folder(c.scene), up_axis=c.scene.up_axis)
@@ -48,14 +49,10 @@ def fit_parts(c: FitRunConfig, config: dict):
     out_dir = fit_run_dir(c, scene.name, identity)
     lpips = None
     if c.lpips.backbone_path and c.lpips.lin_path:
-        from wanderland_nav.gsfit.lpips import LPIPS
-
         lpips = LPIPS.from_files(c.lpips.backbone_path, c.lpips.lin_path)
     else:
         log.info("LPIPS off: set lpips.backbone_path and lpips.lin_path to local AlexNet/LPIPS weights")
     scalar_logger = None
     if c.rerun:
-        from wanderland_nav.viz.rerun_logger import RerunLogger  # rerun only behind viz/
-
         scalar_logger = RerunLogger(out_dir, rollout_every=0, file_name="fit.rrd")
     return scene, out_dir, identity["hash"], lpips, scalar_logger

@@ -21,6 +21,7 @@ from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussi
 from wanderland_nav.compose.cli import compose_config
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.schema import MakeEnvConfig, typed_config
+from wanderland_nav.episodes.generate import GeneratorSettings
 
 
 def hydra_overrides(values: dict, prefix: str = "") -> list[str]:
@@ -72,6 +73,4 @@ def make_env(scene: str = "demo", *, policy=None, **overrides):
 
 
 def _generator(goal_images: bool):
-    from wanderland_nav.episodes.generate import GeneratorSettings
-
     return GeneratorSettings(goal_images=goal_images)

@@ -6,16 +6,17 @@ import dataclasses
 from pathlib import Path
 
 from wanderland_nav.compose.schema import ReplayConfig
+from wanderland_nav.envs.camera import camera_intrinsics
+from wanderland_nav.envs.recording import expert_rollout, render_rollout_frames
+from wanderland_nav.episodes import load_episodes
+from wanderland_nav.render.lod import load_splat
+from wanderland_nav.rollouts import load_rollout
+from wanderland_nav.scene import load_scene
 
 
 def replay_inputs(c: ReplayConfig):
     """-> (rollout, scene or None, episodes it ran, source file). The scene: `scene_path`, else the
     rollout's recorded scene, else the episodes file's folder; episodes: the file the run used."""
-    from wanderland_nav.episodes import load_episodes
-    from wanderland_nav.envs.recording import expert_rollout
-    from wanderland_nav.rollouts import load_rollout
-    from wanderland_nav.scene import load_scene
-
     if c.rollout is None and c.episodes is None:
         raise ValueError("replay: give rollout=<file.npz> and/or episodes=<episodes.json>")
     rollout = load_rollout(c.rollout) if c.rollout is not None else None
@@ -33,8 +34,6 @@ def replay_inputs(c: ReplayConfig):
     if rollout is None:  # expert replay: the camera along the episodes' paths
         if scene is None:
             raise FileNotFoundError(f"episodes={c.episodes}: its scene folder is needed (scene_path=<folder>)")
-        from wanderland_nav.envs.camera import camera_intrinsics
-
         episodes = episodes[: c.max_episodes]
         rollout = expert_rollout(episodes, scene.nav_from_scene, up_axis=scene.up_axis,
                                  camera=dataclasses.asdict(c.camera), control_period=c.control_period,
@@ -62,8 +61,5 @@ def replay_frames(c: ReplayConfig, rollout, scene):
     if scene is None or scene.gaussians_path is None or not Path(scene.gaussians_path).is_file():
         print("replay: no 3dgs.ply for this scene; logging camera frustums without images")
         return None
-    from wanderland_nav.envs.recording import render_rollout_frames
-    from wanderland_nav.render.lod import load_splat
-
     gaussians = load_splat(scene.gaussians_path, c.lod_px)
     return render_rollout_frames(rollout.meta, gaussians, device=c.device)

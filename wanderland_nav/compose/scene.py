@@ -6,7 +6,9 @@ import logging
 import time
 from pathlib import Path
 
+from planners import NavMesh
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
+from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
 from wanderland_nav.scene import load_scene, make_demo_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
 from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
@@ -56,14 +58,10 @@ def scene_episodes(scene, path: str | None, *, num: int, seed: int, generator) -
         if not Path(path).is_file():
             raise FileNotFoundError(f"episodes={path}: no such file")
         return scene, Path(path)
-    from planners import NavMesh
-    from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
-
     if scene.episodes_path is not None and Path(scene.episodes_path).is_file():
         # ours, on an older navmesh: rebuilt on this one
         refresh_if_stale(scene, Path(scene.episodes_path), lambda: NavMesh.load(scene.navmesh_path))
         return scene, Path(scene.episodes_path)
-
     if scene.navmesh_path is None:
         raise FileNotFoundError(f"{scene.root}: no navmesh.npz; prepare the scene first "
                                 f"(python -m wanderland_nav.prepare scene={scene.root})")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -442,10 +443,22 @@ def typed_config(cfg: DictConfig | dict, schema: type):
     return obj
 
 
+def study_config(cfg) -> StudyConfig:
+    """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study`."""
+    cfg = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    if cfg.get("study_debug"):
+        debug = OmegaConf.to_container(cfg.study_debug)
+        drop = set(debug.pop("ppo_stage_drop", []))
+        study = OmegaConf.merge(cfg.get("study") or {}, debug)
+        if drop and study.get("ppo_stage"):  # a staged study's PPO at the debug train's sizes: still minutes
+            kept = [o for o in study.ppo_stage if o.split("=", 1)[0].lstrip("+~") not in drop]
+            study.ppo_stage = kept or ["algo.ppo.enabled=true"]  # still a stage, so its cells are exercised
+        cfg.study = study
+    return typed_config(cfg, StudyConfig)
+
+
 def _config_keys_of(schema: type, prefix: str = "") -> dict[str, str]:
     """{dataclass name (and its bases'): the config key where it sits} for every nested dataclass field."""
-    import typing
-
     out: dict[str, str] = {}
     hints = typing.get_type_hints(schema)
     for f in dataclasses.fields(schema):

@@ -83,21 +83,3 @@ class StudyConfig:
     report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
-
-
-def study_config(cfg) -> StudyConfig:
-    """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study`."""
-    from omegaconf import OmegaConf
-
-    from wanderland_nav.compose.schema import typed_config
-
-    cfg = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
-    if cfg.get("study_debug"):
-        debug = OmegaConf.to_container(cfg.study_debug)
-        drop = set(debug.pop("ppo_stage_drop", []))
-        study = OmegaConf.merge(cfg.get("study") or {}, debug)
-        if drop and study.get("ppo_stage"):  # a staged study's PPO at the debug train's sizes: still minutes
-            kept = [o for o in study.ppo_stage if o.split("=", 1)[0].lstrip("+~") not in drop]
-            study.ppo_stage = kept or ["algo.ppo.enabled=true"]  # still a stage, so its cells are exercised
-        cfg.study = study
-    return typed_config(cfg, StudyConfig)

@@ -12,12 +12,13 @@ import torch
 
 from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
                                           make_policy_from_config, scene_gaussians, shaped_env_config)
-from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
+from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights
 from wanderland_nav.rl.recipe import Recipe
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation, multi_scene_env_fn
@@ -36,8 +37,6 @@ def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
     run_dir = Path(c.run_dir) if c.run_dir else default_run_dir(c, identity)
     last = run_dir / "checkpoints" / "last.pt"
     if last.is_file():
-        from wanderland_nav.rl.checkpoint import load_checkpoint
-
         stored = (load_checkpoint(last).get("config") or {}).get("identity")
         check_resume(stored, identity, run_dir, f"start fresh with another run_dir= (or leave run_dir unset), "
                                                 f"or delete {run_dir}")
@@ -123,8 +122,6 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     logger = make_logger(c.logger, run_dir, scene)
     first = "untrained"
     if c.init_checkpoint:
-        from wanderland_nav.rl.checkpoint import load_policy_weights
-
         load_policy_weights(policy, c.init_checkpoint)
         policy.pretrained_from = str(c.init_checkpoint)
         first = "init"

@@ -25,6 +25,7 @@ write is never replaced.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import logging
 import os
@@ -36,7 +37,10 @@ import torch
 
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
-from wanderland_nav.scene.lidar_splat import META_KEY as LIDAR_SPLAT
+from wanderland_nav.render import Gaussians
+from wanderland_nav.scene import colmap as C, load_scene
+from wanderland_nav.scene.lidar_splat import META_KEY as LIDAR_SPLAT, LidarSplatSettings
+from wanderland_nav.scene.pointcloud import write_ply_points
 
 from .damage import fragment_mask, hole_mask, horizontal_xy
 from .lidar_only import write_lidar_only
@@ -54,8 +58,6 @@ _NOT_COPIED_PREFIX = ("collision_mesh", "navmesh", "episodes", "gt_mesh", ".")
 
 def _source_key(src: Path, spec: DegradeSpec) -> str:
     """Hash of the spec and of every input file's name, size and mtime."""
-    import hashlib
-
     files = [p for p in sorted(src.rglob("*")) if p.is_file() and p.relative_to(src).parts[0] not in
              ("images", "images_mask", "depth", "goal_images") and not p.name.startswith(_NOT_COPIED_PREFIX)]
     ident = [(str(p.relative_to(src)), p.stat().st_size, p.stat().st_mtime_ns) for p in files]
@@ -88,11 +90,9 @@ def _link_or_copy(a, b) -> None:
 
 
 def _degrade_colmap(sdir: Path, src: Path, dst: Path, corr: PoseCorrection) -> None:
-    from wanderland_nav.scene import colmap as C
-
     ext = C.detect_model_ext(sdir)
     model = C.read_model(sdir, ext)
-    _move_images(model.images, corr, C)
+    _move_images(model.images, corr)
     if len(model.points3D):
         model.points3D.xyz = corr.apply_points(model.points3D.xyz)
     C.write_model(dst / sdir.relative_to(src), model, ext)
@@ -101,12 +101,12 @@ def _degrade_colmap(sdir: Path, src: Path, dst: Path, corr: PoseCorrection) -> N
             p = d / f"images_val{vext}"
             if p.is_file():
                 imgs = C.read_images_bin(p) if vext == ".bin" else C.read_images_txt(p)
-                _move_images(imgs, corr, C)
+                _move_images(imgs, corr)
                 out = dst / p.relative_to(src)
                 (C.write_images_bin if vext == ".bin" else C.write_images_txt)(out, imgs)
 
 
-def _move_images(images: dict, corr: PoseCorrection, C) -> None:
+def _move_images(images: dict, corr: PoseCorrection) -> None:
     for im in images.values():
         T = corr.apply_poses(im.world_from_cam()[None])[0]
         R = T[:3, :3].T  # cam_from_world
@@ -128,8 +128,6 @@ def _degrade_transforms(src: Path, dst: Path, corr: PoseCorrection) -> None:
 
 
 def _degrade_gaussians(path: Path, out: Path, corr: PoseCorrection) -> None:
-    from wanderland_nav.render import Gaussians
-
     g = Gaussians.load(path, dtype=torch.float64)
     mu = g.means.numpy()
     idx = corr.nearest(mu)
@@ -151,8 +149,6 @@ def _meta(src: Path, scene, spec: DegradeSpec, figures: dict) -> dict:
     if "lidar_min_range" in meta:  # sensor-frame metres: the scans are scaled with the world
         meta["lidar_min_range"] = float(meta["lidar_min_range"]) * s
     if LIDAR_SPLAT in meta:  # rebuilt from the degraded scans (lidar_only.py) with its metric settings scaled
-        from wanderland_nav.scene.lidar_splat import LidarSplatSettings
-
         settings = dataclasses.asdict(LidarSplatSettings(**meta[LIDAR_SPLAT]["settings"]).scaled(s))
         meta[LIDAR_SPLAT] = {**meta[LIDAR_SPLAT], "settings": settings, "figures": {
             k[len("splat_"):]: v for k, v in figures.items() if k.startswith("splat_")}}
@@ -163,9 +159,6 @@ def _meta(src: Path, scene, spec: DegradeSpec, figures: dict) -> dict:
 
 def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = None, device: str = "cpu") -> Path:
     """Write the degraded copy of scene folder `src` at `out` (see the module docstring); returns `out`."""
-    from wanderland_nav.scene import load_scene
-    from wanderland_nav.scene.pointcloud import write_ply_points
-
     src, out = Path(src).resolve(), Path(out)
     key = _source_key(src, spec)
     marker = out / MARKER
@@ -191,7 +184,6 @@ def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = N
     if spec.geometry == "splats":
         if scene.gaussians_path is None:
             raise ValueError(f"{src}: geometry='splats' needs 3dgs.ply, which this scene lacks")
-        from wanderland_nav.render import Gaussians
         from .splat_points import splat_depth_points
 
         xyz, rgb = splat_depth_points(Gaussians.load(scene.gaussians_path), scene.cameras,

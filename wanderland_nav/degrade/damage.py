@@ -8,6 +8,7 @@ the cloud's bounding box; the returned mask says which points are kept.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from wanderland_nav.geometry import nav_from_scene_rotation
 
@@ -28,8 +29,6 @@ def hole_mask(xy: np.ndarray, rng: np.random.Generator, rate_per_100m2: float, r
     if n == 0:
         return keep, 0
     centres = lo + rng.random((n, 2)) * (hi - lo)  # [n,2]
-    from scipy.spatial import cKDTree
-
     hit = cKDTree(centres).query(xy, k=1, distance_upper_bound=radius)[0]  # inf where no disc is near
     return ~np.isfinite(hit), n
 

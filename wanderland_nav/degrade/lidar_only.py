@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.atomic import atomic_path
-from wanderland_nav.scene.lidar_splat import META_KEY
+from wanderland_nav.scene.lidar_splat import META_KEY, LidarSplatSettings, splat_from_scans
+from wanderland_nav.scene.pointcloud import read_kitti_bin
 
 from .damage import fragment_mask, hole_mask, horizontal_xy
 from .poses import PoseCorrection
@@ -45,8 +46,6 @@ def lidar_scans(src: Path) -> list[Path]:
 def write_lidar_only(src: Path, dst: Path, scene, spec: DegradeSpec, corr: PoseCorrection,
                      rng: np.random.Generator) -> dict:
     """Write `dst/lidar/*.bin`, `dst/lidar/poses.txt` and copy the other top-level files; -> figures."""
-    from wanderland_nav.scene.pointcloud import read_kitti_bin
-
     if spec.geometry == "splats":
         raise ValueError(f"{src}: preset {spec.name!r} is not applicable to a LiDAR-only scene: splat-derived "
                          "collision geometry needs a photometric 3D Gaussian splat rendered from camera poses "
@@ -82,8 +81,6 @@ def _rebuild_splat(scene, scans: list[np.ndarray], world_from_sensor: np.ndarray
     """The source's `lidar_splat` rebuilt from the degraded scans and poses with its settings scaled by the
     world's scale, written to `dst/3dgs.ply`: the camera then sees exactly the misregistered geometry (drift's
     ghost layers) and the metric error (scale) the collision mesh has. -> figures (prefixed `splat_`)."""
-    from wanderland_nav.scene.lidar_splat import LidarSplatSettings, splat_from_scans
-
     block = scene.meta[META_KEY]
     st = LidarSplatSettings(**block["settings"]).scaled(scale)
     min_range = float(block["figures"]["min_range_m"]) * scale

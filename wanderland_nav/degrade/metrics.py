@@ -16,6 +16,7 @@ scale error counts in full.
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 from scipy.spatial import cKDTree
 
 THRESHOLDS = (0.05, 0.10, 0.20)
@@ -23,8 +24,6 @@ THRESHOLDS = (0.05, 0.10, 0.20)
 
 def sample_surface(mesh, n: int, seed: int) -> np.ndarray:
     """`[n,3]` points uniform by area on a trimesh (seeded; same seed, same points)."""
-    import trimesh
-
     if len(mesh.faces) == 0:
         return np.zeros((0, 3))
     pts, _ = trimesh.sample.sample_surface(mesh, n, seed=seed)
@@ -63,8 +62,6 @@ class SurfaceDistance:
     """
 
     def __init__(self, mesh, *, max_edge: float = 0.3, k: int = 12):
-        import trimesh
-
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
         if len(f) == 0:
             raise ValueError("SurfaceDistance: the mesh has no faces")

@@ -5,6 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import trimesh
+
+from planners import NavMesh
 
 from .build import CORRECTION
 from .metrics import feasible_episodes, navmesh_metrics, surface_metrics
@@ -12,8 +15,6 @@ from .poses import PoseCorrection
 
 
 def _mesh(path):
-    import trimesh
-
     return trimesh.load(path, file_type="ply", process=False, force="mesh")
 
 
@@ -24,8 +25,6 @@ def degradation_report(grounded, degraded, *, episodes=(), samples: int = 100_00
     Surfaces are compared with the grounded collision mesh, and with the ground-truth mesh when the
     grounded scene has one (the demo's `gt_mesh.ply`; completeness over the part its LiDAR saw).
     """
-    from planners import NavMesh
-
     corr_path = Path(degraded.root) / CORRECTION
     # the grounded scene itself (no correction file) gives the reference row: identity field
     corr = PoseCorrection.load(corr_path) if corr_path.is_file() else PoseCorrection(np.zeros((0, 3)), np.zeros((0, 3, 3)),

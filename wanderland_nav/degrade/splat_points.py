@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from wanderland_nav.render import render
+
 
 def _virtual_K(K: np.ndarray, width: int, height: int, size: int) -> tuple[np.ndarray, int, int]:
     f = min(1.0, size / max(width, height))  # never render above the capture's own resolution
@@ -32,8 +34,6 @@ def splat_depth_points(gaussians, cameras, *, size: int = 96, min_alpha: float =
 
     `gaussians`: a `wanderland_nav.render.Gaussians` (scene frame); `cameras`: `scene.Camera`s.
     """
-    from wanderland_nav.render import render
-
     if not cameras:
         raise ValueError("splat depth fusion needs capture cameras; the scene has none")
     g = gaussians.to(device)

@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text, finite_or_none
-from wanderland_nav.gsfit.trainer import FitConfig
+from wanderland_nav.gsfit.evaluate import evaluate_splits, format_table
+from wanderland_nav.gsfit.trainer import FitConfig, Trainer
 
 log = logging.getLogger("wanderland_nav.fit")
 
@@ -20,9 +21,6 @@ def fit_scene(scene, out_dir: Path, fit_cfg: FitConfig, *, record: dict, resume:
               eval_max_views: int | None = None, lpips=None, log_every: int = 0, scalar_logger=None,
               export_to: Path | None = None, progress: bool = True) -> dict:
     """Fit `scene`'s Gaussians into `out_dir`; `record` (config, identity) is stored in `results.json`."""
-    from wanderland_nav.gsfit.evaluate import evaluate_splits, format_table
-    from wanderland_nav.gsfit.trainer import Trainer
-
     t_start, c_start = time.perf_counter(), time.process_time()
     rows: list[str] = []
 

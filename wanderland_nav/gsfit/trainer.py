@@ -28,12 +28,14 @@ from tqdm.auto import tqdm
 
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.errors import WanderlandInputError, torch_load
+from wanderland_nav.geometry import quat_to_rotmat
 from wanderland_nav.gsfit.cull import visible_gaussians
 from wanderland_nav.gsfit.depth_prior import depth_priors
 from wanderland_nav.gsfit.init import InitSettings, active_sh_degree, init_params
 from wanderland_nav.gsfit.losses import LossWeights, inverse_depth_valid, total_loss
 from wanderland_nav.gsfit.metrics import psnr
 from wanderland_nav.gsfit.views import View, load_view, split_cameras, stack
+from wanderland_nav.render import Gaussians, render
 
 PARAM_NAMES = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
 
@@ -94,8 +96,6 @@ class FitConfig:
 
 
 def _default_render():
-    from wanderland_nav.render import render
-
     return render
 
 
@@ -180,8 +180,6 @@ class Trainer:
     # ---- model ---------------------------------------------------------------------------
     def gaussians(self, sh_degree: int | None = None):
         """Current Gaussians (sharing storage with the parameters), SH truncated to `sh_degree`."""
-        from wanderland_nav.render import Gaussians
-
         rest = self.params["sh_rest"]
         if sh_degree is not None:
             rest = rest[:, : (sh_degree + 1) ** 2 - 1]
@@ -316,8 +314,6 @@ class Trainer:
         keep = ~(prune | split)  # split parents are replaced by their two children
         extra: dict[str, list[torch.Tensor]] = {k: [p[k][clone]] for k in PARAM_NAMES}
         if split.any():
-            from wanderland_nav.geometry import quat_to_rotmat
-
             ps = {k: p[k][split] for k in PARAM_NAMES}
             R = quat_to_rotmat(torch.nn.functional.normalize(ps["quats"], dim=-1))  # [S, 3, 3]
             std = ps["log_scales"].exp()

@@ -26,9 +26,9 @@ import torch
 
 from wanderland_nav.geometry import quat_to_rotmat
 from wanderland_nav.recon.poses import PoseSet, ReconInputError, from_cam_from_world
-from wanderland_nav.scene import colmap as C
-from wanderland_nav.scene.types import SceneFormatError
+from wanderland_nav.scene import colmap as C, load_scene
 from wanderland_nav.scene.transforms import _norm_name, read_transforms_json
+from wanderland_nav.scene.types import SceneFormatError
 
 _SCENE_MARKERS = ("sparse", "raw_pcd.ply", "scene.ply", "lidar", "scene_meta.json")
 
@@ -87,8 +87,6 @@ def read_colmap(path) -> PoseSet:
 
 def read_scene(path) -> PoseSet:
     """A Wanderland scene folder's grounded poses (every camera, train and val split)."""
-    from wanderland_nav.scene import load_scene  # pulls in trimesh etc. only when a scene is read
-
     try:
         scene = load_scene(path)
     except SceneFormatError as e:

@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from wanderland_nav.atomic import atomic_path
+
 from .gaussians import Gaussians
 from .packed import RADIUS_SIGMAS
 
@@ -376,8 +378,6 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
 
 def save_nodes(path: Path, nodes: InteriorNodes, *, source_sha256: str) -> None:
     """Write `nodes` as an uncompressed npz, atomically, with the splat's hash and the build settings."""
-    from wanderland_nav.atomic import atomic_path
-
     arrays = {f.name: getattr(nodes, f.name).cpu().numpy() for f in fields(nodes)}
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:

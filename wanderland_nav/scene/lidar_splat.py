@@ -31,8 +31,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
+from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.geometry import rotmat_to_quat
+from wanderland_nav.render import Gaussians
+from wanderland_nav.render.sh import SH_C0
+from wanderland_nav.scene.loader import load_scene, visible_files
+from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_kitti_bin
 
 META_KEY = "lidar_splat"  # scene_meta.json block: settings and figures of the splat in 3dgs.ply
 _METRIC = ("voxel", "crop_radius", "min_sigma", "max_sigma", "ground_cell", "ground_band", "tint_height")
@@ -99,8 +106,6 @@ def _column_height(xyz: np.ndarray, cell: float) -> np.ndarray:
 def _surfel_frames(cent: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Mean distance to the k nearest other centroids [M] and a right-handed frame [M,3,3] whose columns
     are the local principal axes, major first, the normal (least variance) last."""
-    from scipy.spatial import cKDTree
-
     dist, idx = cKDTree(cent).query(cent, k=k + 1)  # [M, k+1], self first
     nb = cent[idx] - cent[idx].mean(axis=1, keepdims=True)  # [M, k+1, 3]
     _, vecs = np.linalg.eigh(np.einsum("mki,mkj->mij", nb, nb))  # ascending eigenvalues
@@ -113,10 +118,6 @@ def splat_from_points(xyz: np.ndarray, intensity: np.ndarray, sensor_xyz: np.nda
                       st: LidarSplatSettings = LidarSplatSettings()):
     """World returns [N,3] (+z up, m) with intensity [N] (>= 0; normalised by its 99th percentile) and the
     sensor positions [K,3] -> (`Gaussians` [M], figures). See the module docstring for every rule."""
-    from wanderland_nav.geometry import rotmat_to_quat
-    from wanderland_nav.render import Gaussians
-    from wanderland_nav.render.sh import SH_C0
-
     xyz = np.asarray(xyz, dtype=np.float64)
     near = np.linalg.norm(xyz[:, None, :2] - np.asarray(sensor_xyz, np.float64)[None, :, :2], axis=-1).min(1) \
         <= st.crop_radius
@@ -154,9 +155,6 @@ def splat_from_scans(scans: list[np.ndarray], world_from_sensor: np.ndarray, min
 def read_scans(root: Path) -> list[np.ndarray]:
     """The KITTI `.bin` scans in `root/lidar` in the loader's order ([N_i, 4], the order of `poses.txt`);
     refuses other files and bad records."""
-    from wanderland_nav.scene.loader import visible_files
-    from wanderland_nav.scene.pointcloud import PointCloudFormatError, read_kitti_bin
-
     files = [p for p in visible_files(Path(root) / "lidar") if p.suffix.lower() != ".txt"]
     if not files or any(p.suffix.lower() != ".bin" for p in files):
         raise WanderlandInputError(f"{Path(root) / 'lidar'}: a LiDAR splat is built from KITTI .bin scans "
@@ -173,9 +171,6 @@ def read_scans(root: Path) -> list[np.ndarray]:
 def write_lidar_splat(root, st: LidarSplatSettings = LidarSplatSettings()) -> dict:
     """Build the splat of LiDAR-only scene folder `root` (`lidar/*.bin` + `lidar/poses.txt`) into
     `root/3dgs.ply` and record settings and figures under `lidar_splat` in `scene_meta.json`; -> figures."""
-    from wanderland_nav.atomic import atomic_write_json
-    from wanderland_nav.scene.loader import load_scene
-
     root = Path(root)
     scene = load_scene(root)
     if scene.lidar_poses is None:

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
+from wanderland_nav.scene import make_demo_scene
+
 TIERS = ("showcase", "evaluation_ready", "training_ready")
 SCENE_MARKERS = ("3dgs.ply", "sparse", "scene.ply", "raw_pcd.ply", "transforms.json", "lidar")
 _ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -187,8 +189,6 @@ def demo_scene_set(root: str | Path, seeds: Sequence[int] = (0, 1, 2), preset: s
 
 def build_demo_scenes(scene_set: SceneSet) -> None:
     """Make the missing demo scenes of a demo set (idempotent: existing builds return at once)."""
-    from wanderland_nav.scene import make_demo_scene
-
     for entry, seed in zip(scene_set.entries, scene_set.demo["seeds"]):
         make_demo_scene(entry.path, seed=seed, preset=scene_set.demo["preset"])
 

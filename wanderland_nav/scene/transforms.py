@@ -13,6 +13,7 @@ indoor polygons; every field is validated with an error that names the file and 
 
 from __future__ import annotations
 
+import difflib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -212,8 +213,6 @@ _REGION_KEYS = ("polygon_xy", "z_min", "z_max", "name")
 
 
 def _unknown_keys(path: Path, obj: dict, known, where: str) -> None:
-    import difflib
-
     for key in obj:
         if key not in known:
             near = difflib.get_close_matches(str(key), list(known), n=1, cutoff=0.6)

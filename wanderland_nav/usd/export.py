@@ -9,8 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
+from planners import NavMesh
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.episodes.schema import load_episodes
 from wanderland_nav.usd import stage as S
 
 log = logging.getLogger(__name__)
@@ -38,7 +41,6 @@ def _require_pxr():
 def build_stage(scene, settings: UsdExportSettings = UsdExportSettings()):
     """An in-memory `Usd.Stage` of `scene` (a prepared `Scene`); returns (stage, summary dict)."""
     _require_pxr()
-    import trimesh
     from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.CreateInMemory()
@@ -62,8 +64,6 @@ def build_stage(scene, settings: UsdExportSettings = UsdExportSettings()):
         S.add_collision_mesh(stage, "/World/Scene/Collision", np.asarray(m.vertices), np.asarray(m.faces))
         summary["collision_faces"] = int(len(m.faces))
     if scene.navmesh_path is not None:
-        from planners import NavMesh
-
         nm = NavMesh.load(scene.navmesh_path)
         S.add_navmesh(stage, "/World/Scene/NavMesh", nm)
         summary["navmesh_faces"] = int(len(nm.tris))
@@ -74,8 +74,6 @@ def build_stage(scene, settings: UsdExportSettings = UsdExportSettings()):
         S.add_cameras(stage, "/World/Scene/Cameras", scene.cameras)
         summary["cameras"] = len(scene.cameras)
     if settings.episodes and scene.episodes_path is not None:
-        from wanderland_nav.episodes.schema import load_episodes
-
         eps = load_episodes(scene.episodes_path)
         S.add_episode_starts(stage, "/World/Scene/EpisodeStarts", eps, scene.nav_from_scene)
         summary["episodes"] = len(eps)

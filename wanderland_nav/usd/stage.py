@@ -25,8 +25,10 @@ import logging
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.render import Gaussians
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +66,6 @@ def add_collision_mesh(stage, path: str, verts: np.ndarray, faces: np.ndarray) -
 
 def add_navmesh(stage, path: str, navmesh) -> None:
     """The walkable triangles (scene frame) with a per-face `island` primvar."""
-    import torch
     from pxr import Sdf, UsdGeom, Vt
 
     local = np.column_stack([navmesh.verts_xy, navmesh.verts_z]).astype(np.float64)
@@ -76,10 +77,8 @@ def add_navmesh(stage, path: str, navmesh) -> None:
 
 def add_gaussians(stage, path: str, ply_path: Path, max_gaussians: int | None = None) -> int:
     """The splats as a Points prim with their raw parameters as primvars; returns how many were written."""
-    import torch
     from pxr import Sdf, UsdGeom, Vt
 
-    from wanderland_nav.render import Gaussians
 
     g = Gaussians.load(ply_path)
     if max_gaussians is not None and len(g) > max_gaussians:  # evenly spaced subset, said in the log

@@ -13,6 +13,9 @@ import csv
 import logging
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
+
 from wanderland_nav.atomic import atomic_path
 
 log = logging.getLogger(__name__)
@@ -36,11 +39,7 @@ def write_learning_curves(run_dir: Path, evals: dict[str, tuple[int, dict]], out
 
     None (with a log line) when there is nothing to draw: no `metrics.csv` (e.g. `logger=rerun`) and no eval.
     """
-    import matplotlib
-
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     run_dir = Path(run_dir)
     csv_path = run_dir / "metrics.csv"
     series = read_metrics(csv_path) if csv_path.is_file() else {}

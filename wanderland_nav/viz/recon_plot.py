@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection
 
 from wanderland_nav.atomic import atomic_path
 
@@ -33,12 +36,7 @@ def plane_axes(gt: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
 def plot_trajectories(out_path, gt: np.ndarray, pred: np.ndarray, *, up: np.ndarray | None = None,
                       title: str = "", pred_label: str = "prediction (Sim(3)-aligned)", dpi: int = 120) -> Path:
     """Write the PNG (atomic) for matched centres `gt [M,3]`, `pred [M,3]` (already aligned) and return its path."""
-    import matplotlib
-
     matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import LineCollection
-
     A = plane_axes(gt, up)
     g2, p2 = np.asarray(gt) @ A.T, np.asarray(pred) @ A.T  # [M,2]
     fig, ax = plt.subplots(figsize=(7, 7))

@@ -7,6 +7,7 @@ rerun has flushed it, so an interrupted replay never leaves a half-written `.rrd
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -55,8 +56,6 @@ def open_viewer(path: str | Path) -> bool:
     Headless machines (no DISPLAY / WAYLAND_DISPLAY on Linux) get the command to run elsewhere instead of
     a viewer process that dies on start.
     """
-    import os
-
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         print(f"no display for the viewer; open the recording where there is one: rerun {path}")
         return False

@@ -26,6 +26,7 @@ from wanderland_nav.envs.recording import rollout_from_tensordict
 from wanderland_nav.rollouts import Rollout
 from wanderland_nav.viz.blueprint import default_blueprint
 from wanderland_nav.viz.rerun_rollout import log_rollout
+from wanderland_nav.viz.rerun_scene import log_scene
 
 
 class RerunLogger:
@@ -107,8 +108,6 @@ class RerunLogger:
             self._meta = rollout.meta
         in_scene = self._meta is not None  # poses can be placed in the scene frame
         if in_scene and self._scene is not None:
-            from wanderland_nav.viz.rerun_scene import log_scene
-
             log_scene(self.rec, self._scene, max_points=20_000, max_cameras=16, camera_images=False)
             self._scene = None  # once
         agents = list(range(min(self.max_agents, rollout.num_agents)))

@@ -12,6 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+import torch
+from PIL import Image
+
+from planners import NavMesh
+from wanderland_nav.scene.collision import load_collision_mesh
 
 _VIEW_COORDS = {
     "+x": rr.ViewCoordinates.RIGHT_HAND_X_UP, "-x": rr.ViewCoordinates.RIGHT_HAND_X_DOWN,
@@ -44,8 +49,6 @@ def navmesh_triangles_scene(navmesh) -> tuple[np.ndarray, np.ndarray, np.ndarray
     The navmesh stores its polygons in a local z-up frame relative to `bmin` (`verts_xy`, `verts_z`,
     metres); `to_scene` maps them back to the scene frame the rest of the recording uses.
     """
-    import torch
-
     local = np.concatenate([navmesh.verts_xy, navmesh.verts_z[:, None]], -1)
     verts = navmesh.to_scene(torch.as_tensor(local, dtype=torch.float64)).numpy().astype(np.float32)
     return verts, np.asarray(navmesh.tris, np.int64), np.asarray(navmesh.tri_island, np.int64)
@@ -65,8 +68,6 @@ def log_navmesh(rec: rr.RecordingStream, navmesh, path: str = "world/navmesh", l
 
 
 def log_collision_mesh(rec: rr.RecordingStream, mesh_path: str | Path, path: str = "world/collision_mesh") -> None:
-    from wanderland_nav.scene.collision import load_collision_mesh
-
     mesh = load_collision_mesh(mesh_path)
     rec.log(path, rr.Mesh3D(vertex_positions=np.asarray(mesh.vertices, np.float32),
                             triangle_indices=np.asarray(mesh.faces, np.int64),
@@ -120,8 +121,6 @@ def log_capture_cameras(rec: rr.RecordingStream, cameras, *, max_cameras: int = 
 
 
 def _load_image(p: Path, max_side: int) -> np.ndarray:
-    from PIL import Image
-
     with Image.open(p) as im:
         im = im.convert("RGB")
         s = max_side / max(im.size)
@@ -143,8 +142,6 @@ def log_scene(rec: rr.RecordingStream, scene, *, navmesh=None, max_points: int =
         log_collision_mesh(rec, scene.collision_mesh_path)
         out["collision_mesh"] = 1
     if navmesh is None and scene.navmesh_path is not None and Path(scene.navmesh_path).is_file():
-        from planners import NavMesh
-
         navmesh = NavMesh.load(scene.navmesh_path)
     if navmesh is not None:
         log_navmesh(rec, navmesh)

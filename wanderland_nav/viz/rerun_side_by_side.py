@@ -14,12 +14,11 @@ import numpy as np
 import rerun as rr
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.scene.collision import load_collision_mesh
 
 
 def write_side_by_side(out: str | Path, meshes: Mapping[str, str | Path], *, gap: float = 5.0) -> dict[str, float]:
     """`meshes`: label -> `collision_mesh.ply` (scene frame, metres). -> label -> x offset applied (m)."""
-    from wanderland_nav.scene.collision import load_collision_mesh
-
     out = Path(out)
     if out.suffix != ".rrd":
         raise ValueError(f"out={out}: recordings end in .rrd")

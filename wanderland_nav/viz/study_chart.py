@@ -10,18 +10,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Mapping
 
+import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+
 from wanderland_nav.atomic import atomic_path
 
 
 def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[str, object]]],
                       title: str = "") -> Path:
     """`chart`: metric -> env -> policy -> estimate with `.value/.low/.high`. Writes a PNG at `out`."""
-    import matplotlib
-
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     metrics = [m for m, per_env in chart.items() if per_env]
     if not metrics:
         raise ValueError(f"{out}: no estimates to draw")

@@ -11,7 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
 
 from wanderland_nav.atomic import atomic_path
 
@@ -49,12 +52,7 @@ def plot_topdown(out_path: str | Path, *, nav_from_scene: np.ndarray, camera_cen
     `planners.NavMesh` (its triangles if it exposes them, else 20k random navigable points).
     A random but seeded sample of `max_paths` episodes is drawn so big sets stay readable.
     """
-    import matplotlib
-
     matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import LineCollection, PolyCollection
-
     R_ns = np.asarray(nav_from_scene, dtype=np.float64)
     cams = np.asarray(camera_centers, dtype=np.float64).reshape(-1, 3) @ R_ns.T
     fig, ax = plt.subplots(figsize=(8, 8))

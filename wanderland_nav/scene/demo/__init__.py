@@ -21,10 +21,24 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
+import trimesh
+from PIL import Image
 
 from wanderland_nav.atomic import atomic_path, atomic_write_json, atomic_write_text
 from wanderland_nav.cache import json_digest, read_record
-from wanderland_nav.geometry import nav_from_scene_rotation
+from wanderland_nav.geometry import nav_from_scene_rotation, rotmat_to_quat
+from wanderland_nav.render.gaussians import Gaussians
+from wanderland_nav.scene.colmap import (
+    ColmapCamera,
+    ColmapImage,
+    ColmapModel,
+    ColmapPoints3D,
+    rotmat_to_qvec,
+    write_images_bin,
+    write_model,
+)
+from wanderland_nav.scene.pointcloud import write_ply_points
 
 from . import capture, lidar, splats, views
 from .layout import Layout, build_layout
@@ -148,8 +162,6 @@ def _build(root: Path, seed: int, preset_name: str, key: str, timings: dict) -> 
     for s in ("train", "val"):
         atomic_write_text(root / "nvs_split" / f"{s}.txt", "".join(n + "\n" for n, sp_ in zip(names, split) if sp_ == s))
     _write_transforms(root, names, split, T_scene, K, p.image_size)
-    from wanderland_nav.scene.pointcloud import write_ply_points
-
     write_ply_points(root / "raw_pcd.ply", (xyz @ S.T).astype(np.float32), col)
     _write_splats(root / "3dgs.ply", sp, S)
     _write_gt_mesh(root / "gt_mesh.ply", layout, S)
@@ -183,8 +195,6 @@ def _build(root: Path, seed: int, preset_name: str, key: str, timings: dict) -> 
 
 
 def _save_png(path: Path, arr: np.ndarray) -> None:
-    from PIL import Image
-
     with atomic_path(path) as tmp:
         Image.fromarray(arr).save(tmp, format="PNG", compress_level=1)
 
@@ -202,9 +212,6 @@ def _write_images(root: Path, names, rgb, depth, mask) -> None:
 def _write_colmap(root: Path, names, split, T_scene, K, p: DemoPreset, xyz_scene, col) -> None:
     """`sparse/0/{cameras,images,points3D}.bin` with the training views, and the extrapolation
     (val) views in `sparse/0/images_val.bin`, as the real v1 release keeps them."""
-    from wanderland_nav.scene.colmap import ColmapCamera, ColmapImage, ColmapModel, ColmapPoints3D, rotmat_to_qvec, \
-        write_images_bin, write_model
-
     cam = ColmapCamera(1, "PINHOLE", p.image_size, p.image_size, np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]]))
     images = {}
     for i, (n, T) in enumerate(zip(names, T_scene)):
@@ -238,11 +245,6 @@ def _write_transforms(root: Path, names, split, T_scene, K, size: int) -> None:
 
 
 def _write_splats(path: Path, sp: "splats.SplatSet", S: np.ndarray) -> None:
-    import torch
-
-    from wanderland_nav.geometry import rotmat_to_quat
-    from wanderland_nav.render.gaussians import Gaussians
-
     R = torch.from_numpy(S @ sp.rotations)  # [N, 3, 3] scene frame
     g = Gaussians(
         means=torch.from_numpy(sp.means @ S.T).float(),
@@ -257,8 +259,6 @@ def _write_splats(path: Path, sp: "splats.SplatSet", S: np.ndarray) -> None:
 
 def _write_gt_mesh(path: Path, layout: Layout, S: np.ndarray) -> None:
     """Ground-truth mesh (evaluation only), scene frame, face colours = mean albedo of each material."""
-    import trimesh
-
     from . import textures
 
     probe = np.linspace(0.0, 40.0, 257)
