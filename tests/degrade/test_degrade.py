@@ -148,7 +148,8 @@ def test_grounded_episodes_stay_feasible_under_the_identity(prepared_demo_scene,
 @pytest.fixture(scope="module")
 def splat_and_identity_reports(prepared_demo_scene, demo_episodes, tmp_path_factory):
     """`degradation_report` rows of the tiny demo's splat-derived world and of an identity copy (the
-    control), both prepared exactly like the grounded fixture (0.25 m collision voxels)."""
+    control), both prepared exactly like the grounded fixture (0.25 m collision voxels, its navmesh settings)."""
+    from planners import NavMesh
     from wanderland_nav.degrade import degradation_report
     from wanderland_nav.episodes.schema import load_episodes
     from wanderland_nav.scene.collision import CollisionSettings
@@ -157,10 +158,12 @@ def splat_and_identity_reports(prepared_demo_scene, demo_episodes, tmp_path_fact
     root = tmp_path_factory.mktemp("degraded")
     grounded = load_scene(prepared_demo_scene)
     eps = load_episodes(demo_episodes)
+    agent = NavMesh.load(grounded.navmesh_path).settings
     rows = {}
     for spec in (DegradeSpec("same"), preset("splat_mesh")):
         out = build_degraded_scene(prepared_demo_scene, root / spec.name, spec)
-        rows[spec.name] = degradation_report(grounded, prepare_scene(out, collision=CollisionSettings(voxel_size=0.25)),
+        rows[spec.name] = degradation_report(grounded, prepare_scene(out, collision=CollisionSettings(voxel_size=0.25),
+                                                                           navmesh=agent),
                                              episodes=eps, samples=10_000)
     return rows
 
