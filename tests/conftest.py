@@ -62,16 +62,21 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
     """(SCENE) A copy of the tiny demo with `collision_mesh.ply` + `navmesh.npz` from `prepare_scene`.
 
     Copied so the demo fixture's own folder stays as `make_demo_scene` wrote it. Collision voxels
-    of 0.25 m (test size); navmesh with the default `NavMeshSettings` (up axis from the scene).
+    of 0.25 m (test size); navmesh with the agent every entry point composes by default
+    (`conf/navigation/default.yaml`, up axis from the scene), so a command composed over this scene with the
+    default settings finds it up to date instead of rebaking it under the other tests.
     """
     import shutil
 
+    from wanderland_nav.compose import compose_config
+    from wanderland_nav.compose.schema import PrepareConfig, typed_config
     from wanderland_nav.scene_preparation import prepare_scene
     from wanderland_nav.scene.collision import CollisionSettings
 
     dst = tmp_path_factory.mktemp("prepared") / Path(tiny_demo_scene).name
     shutil.copytree(tiny_demo_scene, dst)
-    prepare_scene(dst, collision=CollisionSettings(voxel_size=0.25))
+    navmesh = typed_config(compose_config("prepare", []), PrepareConfig).navigation.navmesh
+    prepare_scene(dst, collision=CollisionSettings(voxel_size=0.25), navmesh=navmesh)
     return dst
 
 

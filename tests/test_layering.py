@@ -16,7 +16,8 @@ REPO = Path(__file__).resolve().parents[1]
 FIRST_PARTY = ("wanderland_nav", "planners", "policies")
 #: third-party library -> the parts that may import it
 RESTRICTED = {"hydra": {"compose", "entry points"}, "omegaconf": {"compose", "entry points"},
-              "rerun": {"viz"}, "matplotlib": {"viz"}, "torchrl": {"envs", "rl"}}
+              "rerun": {"viz"}, "matplotlib": {"viz"}, "torchrl": {"envs", "rl"},
+              "gymnasium": {"gym"}}
 
 
 def parse_parts(text: str) -> dict[str, tuple[list[str], set[str]]]:

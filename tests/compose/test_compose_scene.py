@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 
 import pytest
 
+from planners import NavMeshSettings
 from wanderland_nav.compose import SCHEMAS, compose_config, scene_gaussians, typed_config
 from wanderland_nav.compose.scene import prepared_scene
 
@@ -20,10 +22,23 @@ def test_agent_radius_has_one_home_composed_by_every_entry_point(primary):
 
 @pytest.mark.parametrize("primary", NAV_USERS)
 def test_street_preset_changes_only_the_climb(primary):
-    base = typed_config(compose_config(primary, []), SCHEMAS[primary]).navigation
+    default = typed_config(compose_config(primary, []), SCHEMAS[primary]).navigation
+    recast = typed_config(compose_config(primary, ["navigation=recast"]), SCHEMAS[primary]).navigation
     street = typed_config(compose_config(primary, ["navigation=street"]), SCHEMAS[primary]).navigation
-    assert street.navmesh.agent_max_climb == 0.4 and base.navmesh.agent_max_climb == 0.9
-    assert street.collision == base.collision and street.navmesh.agent_radius == base.navmesh.agent_radius
+    assert street.navmesh.agent_max_climb == 0.4 and recast.navmesh.agent_max_climb == 0.9
+    assert street.navmesh == dataclasses.replace(recast.navmesh, agent_max_climb=0.4)
+    assert street.collision == recast.collision == default.collision
+
+
+def test_the_default_agent_is_a_sidewalk_robot_and_recast_keeps_its_demo_agent():
+    """Default: a Unitree Go1 (conf/navigation/default.yaml states each number's source); `navigation=recast`
+    is planners.NavMeshSettings() (Recast's demo agent) apart from the up axis."""
+    default = typed_config(compose_config("prepare", []), SCHEMAS["prepare"]).navigation.navmesh
+    recast = typed_config(compose_config("prepare", ["navigation=recast"]), SCHEMAS["prepare"]).navigation.navmesh
+    assert (default.agent_radius, default.agent_height, default.agent_max_climb, default.agent_max_slope) == \
+        (0.35, 0.5, 0.15, 30.0)
+    assert default.walkable_climb == 3  # whole height cells: a 0.15 m step on 0.05 m cells
+    assert recast == dataclasses.replace(NavMeshSettings(), up_axis=recast.up_axis)
 
 
 def test_no_other_config_file_sets_navmesh_or_collision_settings():

@@ -148,7 +148,8 @@ def test_grounded_episodes_stay_feasible_under_the_identity(prepared_demo_scene,
 @pytest.fixture(scope="module")
 def splat_and_identity_reports(prepared_demo_scene, demo_episodes, tmp_path_factory):
     """`degradation_report` rows of the tiny demo's splat-derived world and of an identity copy (the
-    control), both prepared exactly like the grounded fixture (0.25 m collision voxels)."""
+    control), both prepared exactly like the grounded fixture (0.25 m collision voxels, its navmesh settings)."""
+    from planners import NavMesh
     from wanderland_nav.degrade import degradation_report
     from wanderland_nav.episodes.schema import load_episodes
     from wanderland_nav.scene.collision import CollisionSettings
@@ -157,10 +158,12 @@ def splat_and_identity_reports(prepared_demo_scene, demo_episodes, tmp_path_fact
     root = tmp_path_factory.mktemp("degraded")
     grounded = load_scene(prepared_demo_scene)
     eps = load_episodes(demo_episodes)
+    agent = NavMesh.load(grounded.navmesh_path).settings
     rows = {}
     for spec in (DegradeSpec("same"), preset("splat_mesh")):
         out = build_degraded_scene(prepared_demo_scene, root / spec.name, spec)
-        rows[spec.name] = degradation_report(grounded, prepare_scene(out, collision=CollisionSettings(voxel_size=0.25)),
+        rows[spec.name] = degradation_report(grounded, prepare_scene(out, collision=CollisionSettings(voxel_size=0.25),
+                                                                           navmesh=agent),
                                              episodes=eps, samples=10_000)
     return rows
 
@@ -186,3 +189,26 @@ def test_splat_derived_mesh_differs_from_the_lidar_mesh_by_a_measured_amount(spl
     assert splat["vs_gt_mesh/chamfer_m"] > same["vs_gt_mesh/chamfer_m"] + 0.1, (splat, same)
     assert splat["walkable_ratio"] < 0.5 and splat["islands"] > splat["islands_grounded"], splat
     assert splat["episodes_feasible"] < splat["episodes"], splat
+
+
+def test_the_build_is_keyed_by_its_inputs_contents_not_their_times(tiny_demo_scene, tmp_path):
+    """New bytes with the old modification time (`cp -p`, `rsync -a`) rebuild; a touched, unchanged file does not."""
+    import os
+    import shutil
+
+    from wanderland_nav.scene.pointcloud import write_ply_points
+
+    src = tmp_path / "src"
+    shutil.copytree(tiny_demo_scene, src)
+    spec = DegradeSpec("h", hole_rate_per_100m2=1.0)
+    out = build_degraded_scene(src, tmp_path / "h", spec)
+    stamp, n_before = (out / "raw_pcd.ply").stat().st_mtime_ns, len(load_scene(out).points)
+    os.utime(src / "raw_pcd.ply")  # a new time, the same bytes
+    build_degraded_scene(src, tmp_path / "h", spec)
+    assert (out / "raw_pcd.ply").stat().st_mtime_ns == stamp
+    cloud = load_scene(src)
+    times = (src / "raw_pcd.ply").stat()
+    write_ply_points(src / "raw_pcd.ply", cloud.points[::2].astype(np.float32), cloud.colors[::2])
+    os.utime(src / "raw_pcd.ply", ns=(times.st_atime_ns, times.st_mtime_ns))  # new bytes, the old time
+    build_degraded_scene(src, tmp_path / "h", spec)
+    assert len(load_scene(out).points) < n_before

@@ -36,6 +36,14 @@ def _level(shared_data, name, **kw) -> NavMesh:
     return NavMesh.bake(trimesh.load(shared_data / "meshes" / f"{name}.obj", force="mesh"), NavMeshSettings(**kw))
 
 
+def _composed_agent(*overrides: str) -> NavMeshSettings:
+    """The navmesh settings every entry point composes (`conf/navigation/`), with `overrides`."""
+    from wanderland_nav.compose import compose_config
+    from wanderland_nav.compose.schema import PrepareConfig, typed_config
+
+    return typed_config(compose_config("prepare", list(overrides)), PrepareConfig).navigation.navmesh
+
+
 @pytest.mark.parametrize("name, kw, heights", [
     ("dungeon", {}, True),
     ("nav_test", {"cell_size": 0.6}, True),  # many disconnected parts; 0.6 m cells keep it to about a second
@@ -51,6 +59,22 @@ def test_reference_paths_on_the_shared_levels(shared_data, name, kw, heights):
         assert vertical.max() <= nm.settings.agent_max_climb + nm.settings.cell_height
 
 
+@pytest.mark.parametrize("name, kw", [
+    pytest.param("dungeon", {}, marks=pytest.mark.slow),  # ~5 s bake on 0.05 m height cells
+    ("nav_test", {"cell_size": 0.6}),
+    ("undulating", {}),
+])
+def test_the_default_agent_never_steps_above_its_climb_on_the_shared_levels(shared_data, name, kw):
+    """The default agent (a sidewalk robot, conf/navigation/default.yaml): on every shared level no reference
+    path drops or climbs more than its step (plus one height cell of quantisation)."""
+    settings = _composed_agent()
+    assert settings.agent_max_climb <= 0.2  # a robot's step, not Recast's 0.9 m demo agent
+    nm = _level(shared_data, name, **{**settings.to_dict(), "up_axis": "+y", **kw})
+    horizontal, vertical = _steps(nm, 40, seed=0)
+    assert horizontal.max() <= STEP + 1e-6
+    assert vertical.max() <= settings.agent_max_climb + settings.cell_height
+
+
 def test_reference_paths_on_the_demo(prepared_demo_scene):
     nm = NavMesh.load(prepared_demo_scene / "navmesh.npz")
     horizontal, vertical = _steps(nm, 60, seed=0)
@@ -61,11 +85,9 @@ def test_reference_paths_on_the_demo(prepared_demo_scene):
 @pytest.mark.slow  # ~8 s: a second bake of the demo
 def test_a_robot_scale_agent_has_no_step_above_its_climb(prepared_demo_scene):
     """`navigation=habitat` (climbs 0.2 m): no reference path on the demo drops or climbs a ledge."""
-    from wanderland_nav.compose import compose_config
-    from wanderland_nav.compose.schema import PrepareConfig, typed_config
     from wanderland_nav.scene_preparation import load_collision_mesh
 
-    settings = typed_config(compose_config("prepare", ["navigation=habitat"]), PrepareConfig).navigation.navmesh
+    settings = _composed_agent("navigation=habitat")
     assert (settings.agent_radius, settings.agent_max_climb, settings.agent_height) == (0.1, 0.2, 1.5)
     nm = NavMesh.bake(load_collision_mesh(prepared_demo_scene / "collision_mesh.ply"),
                       NavMeshSettings(**{**settings.to_dict(), "up_axis": "-y"}))

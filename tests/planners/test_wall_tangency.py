@@ -43,15 +43,18 @@ def test_field_is_lipschitz_at_wall_edges(prepared_demo_scene):
     corner = np.concatenate([nm.node_xy[tang], nm.node_xy[tang]])
     mid = (corner + ends) / 2  # on the wall edge (within NODE_OFFSET)
     tri = nm._locate_local(torch.from_numpy(np.c_[mid, np.zeros(len(mid))]), 1e9).numpy()
-    mid, tri = mid[tri >= 0], tri[tri >= 0]
+    largest = max(nm.islands, key=lambda i: i.area).id  # wall edges and goals on one island: every pair finite
+    on = (tri >= 0) & (nm.tri_island[np.maximum(tri, 0)] == largest)
+    mid, tri = mid[on], tri[on]
+    assert len(mid) >= 50
     centroid = nm.verts_xy[nm.tris[tri]].mean(1)
     inner = mid + 0.02 * (centroid - mid) / np.linalg.norm(centroid - mid, axis=1, keepdims=True)
     z = nm.verts_z[nm.tris[tri]].mean(1)
-    field = nm.distance_field(nm.random_navigable_points(6, seed=7))
+    field = nm.distance_field(nm.random_navigable_points(6, seed=7, island=largest))
     for g in range(len(field)):
         gi = np.full(len(mid), g)
         d0, _ = field.query_local(np.c_[mid, z], gi)
         d1, _ = field.query_local(np.c_[inner, z], gi)
         fin = np.isfinite(d0) & np.isfinite(d1)
-        assert fin.mean() > 0.5
+        assert fin.mean() > 0.95
         assert np.abs(d0[fin] - d1[fin]).max() <= 0.02 + 1e-6, np.sort(np.abs(d0[fin] - d1[fin]))[-3:]

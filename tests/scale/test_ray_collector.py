@@ -148,3 +148,43 @@ def test_ray_first_batch_is_the_same_for_the_same_seed():
     assert not torch.equal(a["action"], other["action"])
     half = a.shape[0] // 2  # worker 0's frames, then worker 1's: two seeds, two different streams
     assert not torch.equal(a["action"][:half], a["action"][half:])
+
+
+@pytest.mark.slow  # one Ray start with one worker: ~25 s idle
+def test_the_first_ray_batch_comes_from_the_learners_current_weights():
+    """Weights loaded into the learner's actor after the collector was built (a warm start) are on the worker
+    before its first batch: the batch's log-probs are the warm-start actor's, not those of the actor as pickled."""
+    ray = pytest.importorskip("ray")
+    sys.path.insert(0, str(TESTS / "rl"))
+    from fake_env import FakeNavEnv
+    from test_ppo import tiny_policy
+
+    from wanderland_nav import keys as K
+    from wanderland_nav.rl.ppo import make_actor
+    from wanderland_nav.rl.ray_collector import make_ray_collector
+
+    path = os.pathsep.join([str(TESTS / "rl"), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}})
+    try:
+        actor = make_actor(tiny_policy())
+        stale = make_actor(tiny_policy())  # the weights the worker was built with
+        collector = make_ray_collector(lambda: FakeNavEnv((4,)), actor, frames_per_batch=8, total_frames=8,
+                                       num_workers=1, seed=0)
+        warm = make_actor(tiny_policy())
+        torch.manual_seed(1)
+        with torch.no_grad():
+            for p in warm.parameters():
+                p.add_(0.3 * torch.randn_like(p))
+        actor.load_state_dict(warm.state_dict())  # the warm start, loaded after the collector was built
+        batch = next(iter(collector)).clone()
+        collector.shutdown()
+    finally:
+        ray.shutdown()
+    obs = batch.exclude(K.ACTION_LOG_PROB)
+    with torch.no_grad():
+        def log_prob(a):
+            return a.get_dist(obs.clone()).log_prob(batch[K.ACTION])
+        warm_lp, stale_lp = log_prob(warm), log_prob(stale)
+    torch.testing.assert_close(batch[K.ACTION_LOG_PROB], warm_lp, rtol=1e-4, atol=1e-3)
+    assert (batch[K.ACTION_LOG_PROB] - stale_lp).abs().max() > 1.0  # the check can tell the two apart

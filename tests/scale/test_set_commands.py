@@ -53,18 +53,18 @@ def test_make_episodes_over_a_set_carries_the_generator_settings(tmp_path, recor
 
     report = run(compose_config("make_episodes", [*_set(tmp_path), "num_episodes=7", "seed=3",
                                                   "generator.goal_images=false", "generator.step_size=0.5",
-                                                  "navigation.navmesh.agent_radius=0.35"]))
+                                                  "navigation.navmesh.agent_radius=0.45"]))
     assert {sid: d["episodes"] for sid, d in report.done.items()} == {"demo_seed_0": 7, "demo_seed_1": 7}
     j = recorded[0]
     assert (j.num_episodes, j.seed, j.generator.goal_images, j.generator.step_size, j.navmesh.agent_radius) == \
-        (7, 3, False, 0.5, 0.35)
+        (7, 3, False, 0.5, 0.45)
     # a prepare-only run after it is covered by the same preparation; another episode count is not
     from wanderland_nav.prepare import run as prepare
 
-    assert sorted(prepare(compose_config("prepare", [*_set(tmp_path), "navigation.navmesh.agent_radius=0.35"]))
+    assert sorted(prepare(compose_config("prepare", [*_set(tmp_path), "navigation.navmesh.agent_radius=0.45"]))
                   .skipped) == ["demo_seed_0", "demo_seed_1"]
     assert run(compose_config("make_episodes", [*_set(tmp_path), "num_episodes=8", "generator.goal_images=false",
-                                                "navigation.navmesh.agent_radius=0.35"])).skipped == []
+                                                "navigation.navmesh.agent_radius=0.45"])).skipped == []
 
 
 def test_a_failing_scene_is_reported_and_the_others_finish(tmp_path, recorded, capsys):

@@ -8,6 +8,9 @@ the camera's Gaussians loaded (`build.scene_gaussians`) when the camera is on, g
 the episodes name them (`build.env_factory`), and a policy-facing env: no privileged ground truth,
 episode metrics at done, `pixels` for video.
 
+A scene set (`scene="demo_set"`, or `scene.set.*` overrides) gives one env over all its scenes, prepared
+and given episodes in parallel and resumably as `train` does (`compose/scene_sets.py`).
+
 Keyword overrides are spelled as on the command line, one per config key: `batch_size=8`,
 `debug="smoke"` (a group), `env={"camera": {"width": 64}}` (nested) or `**{"env.camera.width": 64}`.
 """
@@ -20,8 +23,10 @@ import json
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians, shaped_env_config
 from wanderland_nav.compose.cli import compose_config
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
+from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn
 from wanderland_nav.compose.schema import MakeEnvConfig, typed_config
 from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.rl.scene_sets import multi_scene_env_fn
 
 
 def hydra_overrides(values: dict, prefix: str = "") -> list[str]:
@@ -55,21 +60,37 @@ def make_env_config(scene: str = "demo", **overrides) -> MakeEnvConfig:
 
 
 def make_env(scene: str = "demo", *, policy=None, **overrides):
-    """A `NavEnv` (TorchRL `EnvBase`, `batch_size=[batch_size]`) on `scene` ("demo" or a scene folder).
+    """A `NavEnv` (TorchRL `EnvBase`, `batch_size=[batch_size]`) on `scene` ("demo" or a scene folder), or
+    for a scene set (`scene="demo_set"`, or any `scene.set` block) a `MultiSceneNavEnv` whose `batch_size`
+    agents are spread over the set's scenes (`scene.set.num_active` at a time), as `train` steps a set.
 
     policy: a library policy (`policies.make_policy`); the camera, history and waypoint action are shaped
         to it (`compose.shaped_env_config`), as `train` does.
     overrides: keys of `conf/make_env.yaml` (see the module docstring).
     """
     c = make_env_config(scene, **overrides)
+    env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
+    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
+    if c.scene.set is not None:
+        return _scene_set_env(c, env_cfg)
     loaded = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
     loaded, episodes_path = scene_episodes(loaded, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                            generator=_generator(c.episodes.goal_images))
-    env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
-    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     gaussians = scene_gaussians(loaded, c.render.lod_px, needed=env_cfg.camera.enabled)
     return env_factory(loaded, episodes_path, env_cfg, split=None, batch_size=c.batch_size, seed=c.seed,
                        device=c.device, navmesh=load_navmesh(loaded), gaussians=gaussians)()
+
+
+def _scene_set_env(c: MakeEnvConfig, env_cfg):
+    """The set's scenes prepared with `c.navigation` (episodes made where a scene has none), as one env."""
+    if c.episodes.path is not None:
+        raise ValueError(f"episodes.path={c.episodes.path}: a scene set uses each scene's own episodes.json; "
+                         "leave episodes.path null")
+    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
+                            goal_images=c.episodes.goal_images)
+    scene_env = scene_env_fn(paths, env_cfg, split=None, device=c.device, lod_px=c.render.lod_px)
+    return multi_scene_env_fn(list(paths), scene_env, batch_size=c.batch_size, num_active=c.scene.set.num_active,
+                              device=c.device, memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)()
 
 
 def _generator(goal_images: bool):

@@ -18,7 +18,7 @@ rebuilt for the degraded world), `depth/` (metric depth no longer matches a move
 `gt_mesh.ply` (ground truth stays with the grounded scene). Images and masks are hard-linked.
 
 The build happens in a temporary sibling folder renamed into place; a marker with the hash of the
-spec and of the source's inputs makes a rerun return at once, and a folder the project did not
+spec and of the source's inputs (their contents) makes a rerun return at once, and a folder the project did not
 write is never replaced.
 """
 
@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.cache import file_sha256, json_digest
 from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
 from wanderland_nav.render import Gaussians
 from wanderland_nav.scene import colmap as C, load_scene
@@ -57,11 +58,12 @@ _NOT_COPIED_PREFIX = ("collision_mesh", "navmesh", "episodes", "gt_mesh", ".")
 
 
 def _source_key(src: Path, spec: DegradeSpec) -> str:
-    """Hash of the spec and of every input file's name, size and mtime."""
+    """Hash of the spec and of every input file's name and bytes (sha256), never its modification time: a
+    scan or splat replaced with `cp -p` or `rsync -a` (new bytes, old time) makes a new build. Images and
+    masks are left out: they are hard-linked into the copy, not read."""
     files = [p for p in sorted(src.rglob("*")) if p.is_file() and p.relative_to(src).parts[0] not in
              ("images", "images_mask", "depth", "goal_images") and not p.name.startswith(_NOT_COPIED_PREFIX)]
-    ident = [(str(p.relative_to(src)), p.stat().st_size, p.stat().st_mtime_ns) for p in files]
-    return hashlib.sha256(json.dumps([spec.as_dict(), ident]).encode()).hexdigest()[:16]
+    return json_digest([spec.as_dict(), [(p.relative_to(src).as_posix(), file_sha256(p)) for p in files]])
 
 
 def _sparse_dir(root: Path) -> Path | None:

@@ -6,7 +6,11 @@ started with `ray start --head` (then `collector.address=auto`, or `host:6379` f
 Each remote collector builds its own env from `env_fn` (its own scenes for a multi-scene env) and
 collects `frames_per_batch / num_workers` frames per batch; the batches are concatenated for the learner.
 
-Three things on top of TorchRL's and Ray's defaults:
+Four things on top of TorchRL's and Ray's defaults:
+  * The learner's weights reach every worker before each collection starts: TorchRL 0.14 connects the
+    weight sync lazily, on the first `update_policy_weights_`, so without a push the first batch comes from
+    the policy as it was pickled when the collector was built (a warm start loaded after that would be
+    missed; TorchRL warns "iteration started before weight synchronization was initialized").
   * Worker niceness `worker_niceness` (default 0): Ray renices every worker process to 15 so that the
     driver keeps priority; here the driver (the learner) waits while the workers collect, and on a shared
     machine nice-15 collectors starve behind everyone else's nice-0 processes (seen: 2 collectors still
@@ -62,12 +66,24 @@ class SeededEnvFn:
         return self.env_fn()
 
 
+def _weights_first(collector_class):
+    """`collector_class` (TorchRL's `RayCollector`) whose iteration pushes the learner's weights first."""
+
+    class WeightsFirstRayCollector(collector_class):
+        def iterator(self):
+            self.update_policy_weights_()  # the tracked policy's current weights, to every worker; blocks
+            yield from super().iterator()
+
+    return WeightsFirstRayCollector
+
+
 def make_ray_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch: int, total_frames: int,
                        num_workers: int = 2, seed: int = 0, address: str | None = None, cpus_per_worker: float = 1,
                        memory_per_worker_gb: float | None = None, sync_timeout_s: float = 600.0,
                        worker_niceness: int | None = 0):
     """A synchronous `RayCollector` of `num_workers` single-process collectors; joins `address` or starts
-    a local Ray instance with `num_workers * cpus_per_worker` CPUs."""
+    a local Ray instance with `num_workers * cpus_per_worker` CPUs. Every iteration over it starts with the
+    actor's current weights on every worker."""
     try:
         from torchrl.collectors.distributed import RayCollector
         import ray  # noqa: F401
@@ -84,7 +100,7 @@ def make_ray_collector(env_fn: Callable[[], EnvBase], actor, *, frames_per_batch
     remote = {"num_cpus": cpus_per_worker}
     if memory_per_worker_gb:
         remote["memory"] = int(memory_per_worker_gb * 1024**3)
-    c = RayCollector([SeededEnvFn(env_fn, seed, i) for i in range(num_workers)], actor,
+    c = _weights_first(RayCollector)([SeededEnvFn(env_fn, seed, i) for i in range(num_workers)], actor,
                      frames_per_batch=frames_per_batch, total_frames=total_frames, sync=True, ray_init_config=init,
                      remote_configs=remote, collector_class="single",
                      collector_kwargs={"split_trajs": False, "auto_register_policy_transforms": False},
