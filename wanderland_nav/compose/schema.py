@@ -96,6 +96,13 @@ class SceneGroup:
     set: Optional[SceneSetSettings] = None  # a scene set (train/evaluate); single-scene entry points use `path`
 
 
+def robot_navmesh() -> NavMeshSettings:
+    """`conf/navigation/default.yaml`'s agent, a Unitree Go1 (the sources of its numbers are in that file);
+    `planners.NavMeshSettings()` alone stays Recast's demo agent (`navigation=recast`)."""
+    return NavMeshSettings(cell_height=0.05, agent_height=0.5, agent_radius=0.35, agent_max_climb=0.15,
+                           agent_max_slope=30.0)
+
+
 @dataclass
 class NavigationGroup:
     """`conf/navigation/default.yaml`: how a scene becomes walkable. Composed by prepare, train,
@@ -103,7 +110,7 @@ class NavigationGroup:
 
     prepare: bool = True  # build/refresh collision mesh + navmesh with these settings before use
     collision: CollisionSettings = field(default_factory=CollisionSettings)
-    navmesh: NavMeshSettings = field(default_factory=NavMeshSettings)  # up_axis: always the scene's
+    navmesh: NavMeshSettings = field(default_factory=robot_navmesh)  # up_axis: always the scene's
 
 
 # ------------------------------------------------------------------------------ train
@@ -392,11 +399,13 @@ class MakeEnvConfig:
 class BenchmarkConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    env: NavEnvConfig = field(default_factory=train_env_config)
     tasks: List[str] = field(default_factory=lambda: ["pointgoal", "imagegoal", "instruction"])
     pointgoal_input: str = "goal"        # goal: the final goal's vector | route: the route point ahead (CityWalker)
     route_lookahead: float = 3.0
-    policies: List[Any] = field(default_factory=list)  # [{name, reference|checkpoint|target|url, ...}]
+    policies: List[Any] = field(default_factory=lambda: [{"name": "expert", "reference": "expert"},
+                                                          {"name": "random", "reference": "random"}])
+    # [{name, reference|checkpoint|target|url, ...}]
     baseline: Optional[str] = None       # the policy the paired differences are against (null: the first)
     episodes: Optional[str] = None
     demo_episodes: int = at_least(1, 60)
