@@ -18,7 +18,7 @@ import torch
 
 from planners import NavMesh
 from wanderland_nav.episodes import load_episodes
-from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
+from wanderland_nav.episodes.generate import GeneratorSettings, refresh_if_stale, write_scene_episodes
 from wanderland_nav.episodes.schema import load_episode_file
 
 log = logging.getLogger(__name__)
@@ -37,9 +37,6 @@ def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int
     splits: train / val / test fractions of `num`.
     """
     if existing is not None and Path(existing).is_file():
-        from planners import NavMesh
-        from wanderland_nav.episodes.generate import refresh_if_stale
-
         # ours, on an older navmesh: rebuilt on this one
         refresh_if_stale(scene, Path(existing), lambda: NavMesh.load(scene.navmesh_path))
         counts = split_counts(Path(existing))
