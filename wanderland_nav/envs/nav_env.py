@@ -353,7 +353,7 @@ class NavEnv(EnvBase):
         self._collisions = self._collisions + collided.long()
         self._flags = {keys.SUCCESS: success, keys.INTERVENTION: intervention, keys.COLLISION: collided}
         t2 = time.perf_counter()
-        rgb, depth = (self.camera.render(end, plan_yaw, self._counted(), extra=self._people())
+        rgb, depth = (self.camera.render(end, plan_yaw, self._counted(self._serial), extra=self._people())
                       if cfg.camera.enabled and self.carries_frames else (None, None))
         t3 = time.perf_counter()
         self._push_frame(rgb, depth, end)
@@ -437,8 +437,7 @@ class NavEnv(EnvBase):
         render = self.carries_frames and self.config.camera.enabled  # switched off later: the history stays
         if render:
             t0 = time.perf_counter()
-            counted = None if self.count_serials is None else serial < self.count_serials
-            rgb, depth = self.camera.render(pos, yaw, counted, extra=self._people(idx))
+            rgb, depth = self.camera.render(pos, yaw, self._counted(serial), extra=self._people(idx))
             self.timings["reset_render"] += time.perf_counter() - t0
         d0 = self.shortest_length[ep]
         put = lambda state, new: state.index_copy(0, idx, new.to(state.dtype))  # noqa: E731
@@ -529,9 +528,10 @@ class NavEnv(EnvBase):
 
     # ------------------------------------------------------------------ observations
 
-    def _counted(self) -> torch.Tensor | None:
-        """bool `[B]`: the agents whose current episode is counted (`count_serials`); None: all of them."""
-        return None if self.count_serials is None else self._serial < self.count_serials
+    def _counted(self, serial: torch.Tensor) -> torch.Tensor | None:
+        """bool `[n]`: which of the episodes with start serials `serial [n]` are counted (`count_serials`);
+        None: all of them."""
+        return None if self.count_serials is None else serial < self.count_serials
 
     def _push_frame(self, rgb: torch.Tensor, depth: torch.Tensor | None, pos: torch.Tensor) -> None:
         if rgb is not None:  # camera off: no frames (or, switched off later, the history stays)
