@@ -497,11 +497,14 @@ def refresh_if_stale(scene, path: Path, load_navmesh: Callable[[], Any]) -> bool
         num, seed, source = int(gen["num_episodes"]), int(gen["seed"]), gen["instructions"]
     except (KeyError, TypeError, ValueError):
         return False
-    if source != RuleBasedInstructions.name:
-        return False  # instructions from a source this process cannot rebuild
     digest = args_hash(scene.name, num, seed, settings, source, navmesh_fingerprint(getattr(scene, "navmesh_path", None)),
                        splat_fingerprint(scene, settings))
     if gen.get("args_hash") == digest:
+        return False
+    if source != RuleBasedInstructions.name:  # instructions from a source this process cannot rebuild: said, kept
+        log.warning("%s: %s was generated on another navmesh or splat, with instructions from %r, which this "
+                    "process cannot regenerate; it is used as it is (regenerate it with that source)",
+                    scene.name, path, source)
         return False
     log.warning("%s: %s was generated on another navmesh or splat; regenerating it (%d episodes, seed %d, "
                 "its recorded settings)", scene.name, path, num, seed)
