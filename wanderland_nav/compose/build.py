@@ -17,7 +17,7 @@ from wanderland_nav.episodes import load_episodes
 from wanderland_nav.render.lod import load_splat
 from wanderland_nav.rl.checkpoint import load_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
-from wanderland_nav.viz import RerunLogger
+from wanderland_nav import viz
 
 
 def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfig:
@@ -85,8 +85,8 @@ def make_logger(logger_cfg, run_dir: Path, scene=None):
     if logger_cfg.kind in ("console", "csv"):
         return ConsoleCSVLogger(run_dir, print_every=logger_cfg.print_every)
     if logger_cfg.kind == "rerun":
-        return RerunLogger(run_dir, rollout_every=logger_cfg.rollout_every, max_agents=logger_cfg.max_agents,
-                           spawn=logger_cfg.spawn, scene=scene)
+        return viz.RerunLogger(run_dir, rollout_every=logger_cfg.rollout_every, max_agents=logger_cfg.max_agents,
+                               spawn=logger_cfg.spawn, scene=scene)
     raise ValueError(f"logger.kind={logger_cfg.kind!r}: expected console or rerun")
 
 
