@@ -17,7 +17,7 @@ mkdir -p "$DIR"
 # The project's own pins (pyproject.toml), plus the dependencies of those packages that such images lack.
 BINARY=(
   "torchrl==0.14.1" "tensordict>=0.14,<0.15" hoptorch pyvers orjson importlib_metadata
-  "hydra-core>=1.3,<1.4" omegaconf "trimesh>=4.4" "shapely>=2.1" "rtree>=1.2" "embreex>=4.3" "plyfile>=1.1,<2"
+  "hydra-core>=1.3,<1.4" "omegaconf>=2.2,<2.4" "trimesh>=4.4" "shapely>=2.1" "rtree>=1.2" "embreex>=4.3" "plyfile>=1.1,<2"
   "pytest-timeout>=2.3" "gsplat>=1.5,<2"
 )
 "$PY" -m pip download -q --no-deps --only-binary=:all: --python-version "$PYV" --implementation cp \
