@@ -14,6 +14,7 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 import yaml
@@ -244,9 +245,14 @@ def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         ecfg = compose("evaluate", overrides=["scene=folder", f"scene.path={scene}", f"checkpoints=[{ck},{ck}]",
                                               "num_episodes=2", "batch_size=2", f"out={tmp_path}", "progress=false",
-                                              "navigation.collision.voxel_size=0.25"])
+                                              "navigation.collision.voxel_size=0.25", f"save_rollouts={tmp_path}/ro"])
     rows = evaluate(ecfg)
     assert list(rows) == [f"{run_dir.parent.name}/run", str(ck)]
     a, b = rows.values()
     assert a["episodes"] == 2 and a == b      # same weights, same episodes, deterministic policy
     assert (tmp_path / "eval_checkpoints.json").is_file()
+    rollouts = sorted((tmp_path / "ro").glob("*.npz"))  # one per checkpoint: 2 agents, both episodes ended
+    assert len(rollouts) == 2
+    for f in rollouts:
+        with np.load(f, allow_pickle=True) as z:
+            assert z["position"].shape[1:] == (2, 3) and int(z["done"].sum()) >= 2

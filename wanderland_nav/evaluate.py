@@ -41,8 +41,11 @@ def run(cfg: DictConfig):
     if c.checkpoints:
         rows, results, table = compare_checkpoints(c.checkpoints, scene, episodes, load_navmesh(scene), split=split,
                                                    num_episodes=c.num_episodes, batch_size=c.batch_size,
-                                                   device=c.device, seed=c.seed, progress=c.progress)
+                                                   device=c.device, seed=c.seed, progress=c.progress,
+                                                   save_rollouts=c.save_rollouts, save_frames=c.save_frames)
         print(f"{scene.name}: split {split}\n{table}", flush=True)
+        if c.save_rollouts:
+            print(f"wrote one rollout per checkpoint to {c.save_rollouts}")
         atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
                                                           "summary": {k: r.summary for k, r in results.items()}})
         return rows

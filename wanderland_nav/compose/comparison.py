@@ -13,7 +13,8 @@ from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, sc
 from wanderland_nav.compose.scene_sets import scene_env_fn
 from wanderland_nav.compose.schema import typed_config
 from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
+from wanderland_nav.envs.evaluation import PolicyActor
+from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.report import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
@@ -38,12 +39,18 @@ def stored_env_config(conf: dict, path) -> NavEnvConfig:
 
 def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
                         batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False,
-                        scene_set: dict[str, str] | None = None):
+                        scene_set: dict[str, str] | None = None, save_rollouts: str | Path | None = None,
+                        save_frames: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table).
     With `scene_set` (`{scene_id: folder}`, prepared) each checkpoint runs every scene's split instead
-    (`scene`, `episodes_path`, `navmesh` unused); its result has rows overall, indoor/outdoor, scene/<id>."""
+    (`scene`, `episodes_path`, `navmesh` unused); its result has rows overall, indoor/outdoor, scene/<id>.
+    `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
+    `<folder>/<label>.npz` (`/` and `+` as `_`), for `python -m wanderland_nav.replay rollout=<file>`."""
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")
+    if save_rollouts is not None and scene_set is not None:
+        raise ValueError("compare_checkpoints: save_rollouts records single scenes, not a scene set; "
+                         "evaluate one scene of the set with scene=<folder>")
     rows, results = {}, {}
     for path in paths:
         policy, ckpt = policy_from_checkpoint(path, device)
@@ -63,7 +70,10 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
             g = scene_gaussians(scene, render.get("lod_px"), needed=env_cfg.camera.enabled)
             env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
                                              seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
-            res = run_evaluation(env, PolicyActor(policy), num_episodes, seed=seed, name=label, progress=progress)
+            rollout = (Path(save_rollouts) / f"{label.replace('/', '_').replace('+', '_')}.npz"
+                       if save_rollouts is not None else None)
+            res = evaluate_and_record(env, PolicyActor(policy), rollout, num_episodes=num_episodes, seed=seed,
+                                      name=label, frames=save_frames, progress=progress, episodes_path=episodes_path)
             env.close()
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))

@@ -31,6 +31,9 @@ def reference_policy(c: EvaluateConfig, env):
 def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
     """`scene=demo_set` (any `scene.set`): every scene's split, one table with rows overall, indoor/outdoor
     and `scene/<id>`; references, or `checkpoints=[...]` side by side."""
+    if c.save_rollouts:
+        raise ValueError(f"save_rollouts={c.save_rollouts}: rollouts are recorded for one scene, not a scene set "
+                         f"({c.scene.name}); evaluate one of its scenes with scene=<folder>")
     paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.demo_episodes, seed=c.seed,
                             goal_images=c.render_for_reference)
     identity = run_identity(OmegaConf.to_container(cfg, resolve=True), scene_set_identity(paths))
