@@ -52,6 +52,11 @@ def interaction_acceleration(pos: torch.Tensor, vel: torch.Tensor, radius: torch
     v0 = torch.full_like(radius[:, None, :], cfg.social_strength)  # [B, 1, N] V0 of each body j
     v0[..., P:] = cfg.robot_social_strength
     social = (w * v0 / cfg.social_range * torch.exp(-b / cfg.social_range))[..., None] * grad_b
+    # the robot is also an obstacle: the 1995 model's border repulsion U0/R exp(-gap/R), seen all around (a person
+    # does not walk into a standing machine it has just passed, nor let a neighbour push it there)
+    u0 = torch.zeros_like(v0)
+    u0[..., P:] = cfg.robot_obstacle_strength
+    social = social + (u0 / cfg.robot_obstacle_range * torch.exp(-edge / cfg.robot_obstacle_range))[..., None] * n
     # physical: body compression and sliding friction where bodies overlap
     contact = (rsum - dist).clamp_min(0.0)  # g(r_ij - d_ij) [B, P, N]
     dv_t = ((vel[:, None, :, :] - vel[:, :P, None, :]) * t).sum(-1)
