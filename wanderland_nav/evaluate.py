@@ -46,7 +46,8 @@ def run(cfg: DictConfig):
                                                    pedestrians=c.env.pedestrians)
         print(f"{scene.name}: split {split}\n{table}", flush=True)
         atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
-                                                          "summary": {k: r.summary for k, r in results.items()}})
+                                                          "summary": {k: r.summary for k, r in results.items()},
+                                                          "records": {k: r.records for k, r in results.items()}})
         return rows
     env_cfg = c.env
     if env_cfg.camera.enabled and not c.render_for_reference:

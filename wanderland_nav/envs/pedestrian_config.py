@@ -7,7 +7,8 @@ Sources of the defaults:
   model for pedestrian dynamics", Phys. Rev. E 51), clipped to the 1.0-1.6 m/s of everyday walking;
 * the social repulsion (Helbing & Molnar 1995): relaxation time 0.5 s, elliptical potential
   V0 exp(-b / sigma) with V0 = 2.1 m^2/s^2, sigma = 0.3 m, step time 2 s, field of view 200 degrees with weight
-  c = 0.5 behind it;
+  c = 0.5 behind it; a robot is also an obstacle to them, with the model's border repulsion
+  U0 exp(-gap / R), U0 = 10 m^2/s^2, R = 0.2 m;
 * the physical contact forces (Helbing, Farkas & Vicsek 2000, "Simulating dynamical features of escape panic",
   Nature 407): mass 80 kg, body force k = 1.2e5 kg/s^2, sliding friction kappa = 2.4e5 kg/(m s), body radius
   0.25-0.35 m (0.3 here), speed capped at 1.3 x preferred (their v_max);
