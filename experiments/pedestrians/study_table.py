@@ -1,4 +1,4 @@
-"""The study table: trained policies evaluated with 0, 10 and 30 people, paired against 0 people.
+"""The study table: trained policies evaluated with 0, 10 and 30 people, paired against 0 people (rows `<policy> @<N>`).
 
     python experiments/pedestrians/study_table.py --names BC BC+RL "BC+RL ft 10 people" \
         --seed 0 runs/eval_s0_n0 runs/eval_s0_n10 runs/eval_s0_n30 [--seed 1 runs/eval_s1_n0 ...]
@@ -45,17 +45,19 @@ def tables(names: list[str], seeds: dict[int, list[Path]]) -> str:
     groups = [([s], f"seed {s}") for s in seeds] + ([(list(seeds), f"seeds {', '.join(map(str, seeds))} pooled")]
                                                     if len(seeds) > 1 else [])
     for group, title in groups:
-        rows = {f"{name} {n}": [runs[(name, n)][s] for s in group] for name in names for n in counts
+        rows = {f"{name} @{n}": [runs[(name, n)][s] for s in group] for name in names for n in counts
                 if all(s in runs.get((name, n), {}) for s in group)}
-        pairs = [(f"{name} {n}", f"{name} 0") for name in names for n in counts
-                 if n and f"{name} {n}" in rows and f"{name} 0" in rows]
+        pairs = [(f"{name} @{n}", f"{name} @0") for name in names for n in counts
+                 if n and f"{name} @{n}" in rows and f"{name} @0" in rows]
         if len(names) > 2:
-            pairs += [(f"{names[2]} {n}", f"{names[1]} {n}") for n in counts
-                      if f"{names[2]} {n}" in rows and f"{names[1]} {n}" in rows]
+            pairs += [(f"{names[2]} @{n}", f"{names[1]} @{n}") for n in counts
+                      if f"{names[2]} @{n}" in rows and f"{names[1]} @{n}" in rows]
         out.append(f"## {title}: policy, people\n\n{seed_table(rows, None, (*TABLE_COLUMNS, 'IR_pedestrian'), pairs=pairs)}")
-        social = {k: v for k, v in rows.items() if not k.endswith(" 0")}
+        social = {k: v for k, v in rows.items() if not k.endswith(" @0")}
         spairs = [p for p in pairs if p[0] in social and p[1] in social]
-        out.append(f"## {title}: social metrics with people\n\n{seed_table(social, None, SOCIAL_COLUMNS, pairs=spairs)}")
+        if social:
+            out.append(f"## {title}: social metrics with people\n\n"
+                       f"{seed_table(social, None, SOCIAL_COLUMNS, pairs=spairs)}")
     return "\n\n".join(out)
 
 
