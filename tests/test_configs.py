@@ -231,17 +231,23 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     assert run(cfg) == rows
 
 
+def _smoke_checkpoint(scene, tmp_path):
+    """The smoke BC run's checkpoint (trained here when the test runs alone, -k)."""
+    from wanderland_nav.train import run
+
+    run_dir = _SMOKE_RUNS.get("mbra_bc")
+    if run_dir is None:
+        run_dir = tmp_path / "run"
+        run(smoke_cfg("mbra_bc", scene, run_dir))
+    return run_dir, run_dir / "checkpoints" / "last.pt"
+
+
 def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
     """`python -m wanderland_nav.evaluate checkpoints=[...]`: a trained checkpoint next to another."""
     from wanderland_nav.evaluate import run as evaluate
-    from wanderland_nav.train import run
 
     scene = demo_episodes.parent
-    run_dir = _SMOKE_RUNS.get("mbra_bc")
-    if run_dir is None:                  # run alone (-k): train the smoke BC run here
-        run_dir = tmp_path / "run"
-        run(smoke_cfg("mbra_bc", scene, run_dir))
-    ck = run_dir / "checkpoints" / "last.pt"
+    run_dir, ck = _smoke_checkpoint(scene, tmp_path)
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         ecfg = compose("evaluate", overrides=["scene=folder", f"scene.path={scene}", f"checkpoints=[{ck},{ck}]",
                                               "num_episodes=2", "batch_size=2", f"out={tmp_path}", "progress=false",
@@ -256,3 +262,22 @@ def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
     for f in rollouts:
         with np.load(f, allow_pickle=True) as z:
             assert z["position"].shape[1:] == (2, 3) and int(z["done"].sum()) >= 2
+
+
+def test_checkpoints_meet_the_evaluations_pedestrians(demo_episodes, tmp_path):
+    """A checkpoint trained without people, evaluated with `env.pedestrians.count=3`: its episodes have people (the
+    crowd is the test's condition, not the checkpoint's), and the per-episode records are stored for pairing."""
+    import json
+
+    from wanderland_nav.evaluate import run as evaluate
+
+    scene = demo_episodes.parent
+    _, ck = _smoke_checkpoint(scene, tmp_path)
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        ecfg = compose("evaluate", overrides=["scene=folder", f"scene.path={scene}", f"checkpoints=[{ck}]",
+                                              "num_episodes=2", "batch_size=2", f"out={tmp_path}", "progress=false",
+                                              "navigation.collision.voxel_size=0.25", "env.pedestrians.count=3"])
+    row, = evaluate(ecfg).values()
+    assert "person_collisions" in row and row["episodes"] == 2
+    records, = json.loads((tmp_path / "eval_checkpoints.json").read_text())["records"].values()
+    assert [r["pedestrians"] for r in records] == [3, 3]

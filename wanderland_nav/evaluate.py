@@ -1,5 +1,6 @@
 """Evaluate: `python -m wanderland_nav.evaluate [reference=expert|random] [scene=<demo | folder>]`, or trained
-policies side by side: `checkpoints=[a.pt,b.pt]` (each in the env it was trained in; the first is the baseline).
+policies side by side: `checkpoints=[a.pt,b.pt]` (each in the env it was trained in; the first is the baseline;
+`env.pedestrians.*` of this command is the crowd they all meet).
 `scene=demo_set` (any `scene.set`) evaluates every scene of the set, with a row per scene.
 
 Prints the NE / SR / SPL / IR table (overall, indoor / outdoor) and writes `eval_<name>.{csv,json}` to `out`
@@ -42,12 +43,14 @@ def run(cfg: DictConfig):
         rows, results, table = compare_checkpoints(c.checkpoints, scene, episodes, load_navmesh(scene), split=split,
                                                    num_episodes=c.num_episodes, batch_size=c.batch_size,
                                                    device=c.device, seed=c.seed, progress=c.progress,
-                                                   save_rollouts=c.save_rollouts, save_frames=c.save_frames)
+                                                   pedestrians=c.env.pedestrians, save_rollouts=c.save_rollouts,
+                                                   save_frames=c.save_frames)
         print(f"{scene.name}: split {split}\n{table}", flush=True)
         if c.save_rollouts:
             print(f"wrote one rollout per checkpoint to {c.save_rollouts}")
         atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
-                                                          "summary": {k: r.summary for k, r in results.items()}})
+                                                          "summary": {k: r.summary for k, r in results.items()},
+                                                          "records": {k: r.records for k, r in results.items()}})
         return rows
     env_cfg = c.env
     if env_cfg.camera.enabled and not c.render_for_reference:

@@ -1,6 +1,7 @@
 """The expert among pedestrians (SR, collisions, yielding or not) and the crowd's cost to a camera-on env.
 
     python experiments/pedestrians/expert_and_cost.py --root <dir> [--episodes 24] [--batch 8] [--steps 10] [--res 64]
+        [--part expert|cost|both]
 
 The tiny demo block (seed 0) is built and prepared in `--root` when it is not there. Part 1: the expert
 (camera off) on every episode with 0, 10 and 30 people per env instance, yielding (`ExpertPolicy`'s wait
@@ -55,8 +56,16 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--res", type=int, default=64)
+    ap.add_argument("--part", choices=("expert", "cost", "both"), default="both")
     a = ap.parse_args()
     scene, nm, eps = demo(a.root, a.episodes)
+    if a.part != "cost":
+        expert_table(a, scene, nm, eps)
+    if a.part != "expert":
+        cost_table(a, scene, nm, eps)
+
+
+def expert_table(a, scene, nm, eps) -> None:
     print("| people | expert | N | SR | IR_pedestrian | person_collisions | min_person_distance | near_10_seconds |")
     print("|---|---|---|---|---|---|---|---|")
     for count in (0, 10, 30):
@@ -69,6 +78,9 @@ def main() -> None:
             print(f"| {count} | {'yields' if yielding else 'does not yield'} | {o['episodes']} | {o['SR']:.3f} | "
                   f"{o['IR_pedestrian']:.3f} | {o.get('person_collisions', 0):.3f} | "
                   f"{o.get('min_person_distance', float('nan')):.2f} | {o.get('near_10_seconds', 0):.2f} |", flush=True)
+
+
+def cost_table(a, scene, nm, eps) -> None:
     g = load_splat(scene.gaussians_path)
     print(f"\n| repeat | people | agent-frames/s | crowd and rules s | render s |  ({a.batch} agents, {a.res} px, "
           f"{a.steps} steps)")

@@ -246,3 +246,63 @@ def test_two_people_walking_head_on_pass_each_other_without_overlap():
         closest = min(closest, float((pos[0, 0] - pos[0, 1]).norm()))
     assert float(pos[0, 0, 0]) > 3.0 and float(pos[0, 1, 0]) < -3.0  # both got past
     assert closest > 2 * cfg.radius - 0.05, closest  # by stepping aside, not through each other
+
+
+class _Corridor:
+    """A straight walkable band |y| <= half (nav = scene frame, z = 0) with the navmesh calls `Crowd` makes:
+    straight-line paths (the goal is always visible) and motion clipped to the band, as the navmesh slides a
+    body along its boundary."""
+
+    def __init__(self, half: float, goal_xy):
+        self.half, self.goal = half, torch.tensor([[*goal_xy, 0.0]], dtype=torch.float64)
+
+    def island_of(self, points):
+        return np.zeros(np.asarray(points).shape[:-1], dtype=np.int64)
+
+    def random_navigable_points(self, n, seed, island=None):
+        return np.tile(np.array([[-20.0, 0.0, 0.0]]), (n, 1))
+
+    def distance_field(self, pool):
+        corridor = self
+
+        class Field:
+            def __len__(self):
+                return 1
+
+            def next_point(self, points, goal_index):
+                p = torch.as_tensor(points, dtype=torch.float64)
+                return (p - corridor.goal)[:, :2].norm(dim=-1), corridor.goal.expand(len(p), 3).clone()
+
+        return Field()
+
+    def move_along_surface(self, start, target):
+        t = torch.as_tensor(target, dtype=torch.float32)
+        end = torch.cat([t[:, :1], t[:, 1:2].clamp(-self.half, self.half), t[:, 2:]], 1)
+        return end, (end != t).any(-1).numpy()
+
+
+@pytest.mark.parametrize("rule", ["old", "new"])
+def test_a_person_passing_a_robot_by_the_boundary_does_not_walk_into_it(rule, monkeypatch):
+    """The scene of the expert's collisions while it waited: a robot standing in a passage whose walkable band
+    (0.9 m) leaves a person no room to pass, the person walking toward it. The old rule (the robot repelled only as
+    a person is, the boundary slide taken as it comes) squeezes the person past into contact; with the robot's
+    obstacle repulsion and the stop of a slide that would end at the robot, the person waits clear of it."""
+    import wanderland_nav.envs.crowd as crowd_module
+
+    cfg = PedestrianConfig(count=1, pause_probability=0.0)
+    if rule == "old":
+        cfg.robot_obstacle_strength = 0.0
+        monkeypatch.setattr(crowd_module, "_ROBOT_BUFFER", -math.inf)
+    nm = _Corridor(0.45, (6.0, 0.0))
+    crowd = Crowd(cfg, nm, np.eye(3), [[0.0, 0.0, 0.0]], 1, 0.5)
+    robot = torch.tensor([[0.0, 0.1, 0.0]])
+    crowd.reset(torch.arange(1), robot)
+    crowd.pos = torch.tensor([[[-4.0, 0.0, 0.0]]])
+    crowd.v0 = torch.full((1, 1), 1.34)
+    closest = min(float(crowd.step(robot, torch.zeros(1, 2))) for _ in range(16))  # 8 s
+    contact = cfg.radius + cfg.robot_radius
+    if rule == "old":
+        assert closest < contact, closest
+    else:
+        assert closest > contact + 0.05, closest
+        assert float(crowd.pos[0, 0, 0]) < 0.0  # still on its side: it waited rather than pushed past

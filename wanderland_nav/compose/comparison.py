@@ -2,11 +2,15 @@
 
 Each checkpoint is evaluated in the env it was trained in (its stored `env` / `render` config, shaped to
 its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the paired
-differences (with 95 % intervals) below the table.
+differences (with 95 % intervals) below the table. The pedestrians are the exception: they are a condition of
+the test, not of the policy, so the evaluation's `env.pedestrians` replaces every checkpoint's stored crowd
+(policies trained with and without people then meet the same people).
 """
 
 from __future__ import annotations
 
+import logging
+from dataclasses import replace
 from pathlib import Path
 
 from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
@@ -18,6 +22,8 @@ from wanderland_nav.envs.recording import evaluate_and_record
 from wanderland_nav.report import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
 from wanderland_nav.rl.scene_sets import SceneSetEvaluation
+
+log = logging.getLogger(__name__)
 
 
 def checkpoint_label(path: Path) -> str:
@@ -39,11 +45,12 @@ def stored_env_config(conf: dict, path) -> NavEnvConfig:
 
 def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
                         batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False,
-                        scene_set: dict[str, str] | None = None, save_rollouts: str | Path | None = None,
-                        save_frames: bool = False):
+                        scene_set: dict[str, str] | None = None, pedestrians=None,
+                        save_rollouts: str | Path | None = None, save_frames: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table).
     With `scene_set` (`{scene_id: folder}`, prepared) each checkpoint runs every scene's split instead
     (`scene`, `episodes_path`, `navmesh` unused); its result has rows overall, indoor/outdoor, scene/<id>.
+    `pedestrians` (a `PedestrianConfig`; None: each checkpoint's own) is the crowd every checkpoint meets.
     `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
     `<folder>/<label>.npz` (`/` and `+` as `_`), for `python -m wanderland_nav.replay rollout=<file>`."""
     if not paths:
@@ -57,6 +64,11 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         conf = ckpt.get("config") or {}
         render = conf.get("render") or {}
         env_cfg = shaped_env_config(stored_env_config(conf, path), policy, render.get("image_size"))
+        if pedestrians is not None:
+            if env_cfg.pedestrians.count != pedestrians.count:
+                log.info("%s: trained with %d pedestrians, evaluated with %d", path, env_cfg.pedestrians.count,
+                         pedestrians.count)
+            env_cfg = replace(env_cfg, pedestrians=pedestrians)
         goal_kw = dict(goal_input=str(conf.get("goal_input") or "goal"),
                        lookahead=float(conf.get("route_lookahead") or 3.0))  # as the checkpoint was trained
         label = checkpoint_label(Path(path))

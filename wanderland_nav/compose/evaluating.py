@@ -42,10 +42,12 @@ def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
     if c.checkpoints:
         rows, results, table = compare_checkpoints(c.checkpoints, None, None, None, split=split,
                                                    num_episodes=c.num_episodes, batch_size=c.batch_size,
-                                                   device=c.device, seed=c.seed, progress=c.progress, scene_set=paths)
+                                                   device=c.device, seed=c.seed, progress=c.progress, scene_set=paths,
+                                                   pedestrians=c.env.pedestrians)
         print(f"set {c.scene.name} ({len(paths)} scenes): split {split}\n{table}", flush=True)
         atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
-                                                          "summary": {k: r.summary for k, r in results.items()}})
+                                                          "summary": {k: r.summary for k, r in results.items()},
+                                                          "records": {k: r.records for k, r in results.items()}})
         return rows
     env_cfg = c.env if c.render_for_reference else blind_env_config(c.env)
     policy = partial(reference_policy, c)

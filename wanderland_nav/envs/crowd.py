@@ -25,6 +25,7 @@ from wanderland_nav.envs.pedestrian_config import PedestrianConfig
 from wanderland_nav.envs.social_force import integrate
 
 _CANDIDATES = 8  # spawn candidates per person; the first clear of the robot is taken
+_ROBOT_BUFFER = 0.1  # m beyond contact: a boundary slide ending this close to a robot (and closer than before) stops
 
 
 class Crowd:
@@ -141,6 +142,12 @@ class Crowd:
         end, collided = self.navmesh.move_along_surface(self._scene(flat), self._scene(target))
         end = self._nav(end).view(B, P, 3)
         collided = torch.as_tensor(np.asarray(collided), dtype=torch.bool).view(B, P)
+        # the clip is not the force's motion: sliding along the boundary can carry a person the force kept clear
+        # into a robot standing near it; that person stops where it was instead (closer than `robot_buffer` and
+        # closer than before), as someone with no room to pass waits
+        d_end, d_start = (end[..., :2] - rp).norm(dim=-1), (self.pos[..., :2] - rp).norm(dim=-1)
+        stop = collided & (d_end < c.radius + c.robot_radius + _ROBOT_BUFFER) & (d_end < d_start)
+        end = torch.where(stop[..., None], self.pos, end)
         vel = torch.where(collided[..., None], (end[..., :2] - self.pos[..., :2]) / T, vel)
         moved = (end[..., :2] - self.pos[..., :2]).norm(dim=-1)
         blocked = walking & (moved < 0.2 * self.v0 * T)

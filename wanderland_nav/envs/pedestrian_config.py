@@ -7,7 +7,8 @@ Sources of the defaults:
   model for pedestrian dynamics", Phys. Rev. E 51), clipped to the 1.0-1.6 m/s of everyday walking;
 * the social repulsion (Helbing & Molnar 1995): relaxation time 0.5 s, elliptical potential
   V0 exp(-b / sigma) with V0 = 2.1 m^2/s^2, sigma = 0.3 m, step time 2 s, field of view 200 degrees with weight
-  c = 0.5 behind it;
+  c = 0.5 behind it; a robot is also an obstacle to them, with the model's border repulsion
+  U0 exp(-gap / R), U0 = 10 m^2/s^2, R = 0.2 m;
 * the physical contact forces (Helbing, Farkas & Vicsek 2000, "Simulating dynamical features of escape panic",
   Nature 407): mass 80 kg, body force k = 1.2e5 kg/s^2, sliding friction kappa = 2.4e5 kg/(m s), body radius
   0.25-0.35 m (0.3 here), speed capped at 1.3 x preferred (their v_max);
@@ -38,6 +39,8 @@ class PedestrianConfig:
     social_strength: float = 2.1  # m^2/s^2, V0 (Helbing & Molnar 1995)
     social_range: float = 0.3  # m, sigma
     robot_social_strength: float = 2.1  # m^2/s^2: V0 of the robot as people see it (default: as a person)
+    robot_obstacle_strength: float = 10.0  # m^2/s^2: U0 of the robot as an obstacle (Helbing & Molnar 1995 borders)
+    robot_obstacle_range: float = 0.2  # m: R of that border potential
     step_time: float = 2.0  # s, the look-ahead of the elliptical potential
     view_angle_deg: float = 200.0  # 2 phi, the field of view
     out_of_view_weight: float = 0.5  # c, the weight of bodies outside it
@@ -63,7 +66,8 @@ class PedestrianConfig:
             ("count", self.count >= 0), ("speed_mean", self.speed_mean > 0), ("speed_std", self.speed_std >= 0),
             ("speed_min", 0 < self.speed_min <= self.speed_max), ("max_speed_factor", self.max_speed_factor >= 1),
             ("radius", self.radius > 0), ("mass", self.mass > 0), ("relaxation_time", self.relaxation_time > 0),
-            ("social_range", self.social_range > 0), ("step_time", self.step_time >= 0),
+            ("social_range", self.social_range > 0),
+            ("robot_obstacle_strength", self.robot_obstacle_strength >= 0), ("robot_obstacle_range", self.robot_obstacle_range > 0), ("step_time", self.step_time >= 0),
             ("view_angle_deg", 0 < self.view_angle_deg <= 360), ("out_of_view_weight", 0 <= self.out_of_view_weight <= 1), ("dt", 0 < self.dt <= 0.1),
             ("waypoints", self.waypoints >= 2), ("arrive_distance", self.arrive_distance > 0),
             ("pause_probability", 0 <= self.pause_probability <= 1), ("pause_min", 0 <= self.pause_min <= self.pause_max),

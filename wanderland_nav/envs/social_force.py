@@ -6,13 +6,17 @@ Each person i is driven toward its preferred velocity and pushed by every other 
     dv_i/dt = (v0_i e_i - v_i) / tau
             + sum_j w_ij (V0 / sigma) exp(-b_ij / sigma) grad b_ij                 (1995: social, elliptical)
             + sum_j [k g(r_ij - d_ij) n_ij + kappa g(r_ij - d_ij) dv^t_ji t_ij] / m  (2000: body and friction)
+            + sum_robots (U0 / R) exp(-gap_ir / R) n_ir                            (1995: borders)
 
 b_ij is the semi-minor axis of the ellipse through i with foci at j and j's next step s_j = v_j dt_step:
 2 b = sqrt((|r| + |r - s_j|)^2 - |s_j|^2), so people give way to where others are going; r is x_i - x_j
 shortened by the radii sum (edge to edge: the 1995 model's pedestrians are points);
 w_ij = 1 for j inside i's field of view (2 phi around e_i), else c. d_ij is the centre distance, r_ij the radii
 sum, n_ij the unit vector from j to i, t_ij its tangent, g(x) = max(x, 0), dv^t_ji the tangential velocity
-difference. Walls are the navmesh's job (`crowd.py`). Parameters: `PedestrianConfig` (its docstring gives the
+difference. A robot is both a walker (the elliptical term, with its own V0) and an obstacle: the 1995
+model's border repulsion on the edge gap, U0 = 10 m^2/s^2, R = 0.2 m, without a field of view (50 m/s^2 at
+touch against the walker term's 7, which let people brush a standing robot). Walls are the navmesh's job
+(`crowd.py`). Parameters: `PedestrianConfig` (its docstring gives the
 sources).
 """
 
@@ -52,6 +56,11 @@ def interaction_acceleration(pos: torch.Tensor, vel: torch.Tensor, radius: torch
     v0 = torch.full_like(radius[:, None, :], cfg.social_strength)  # [B, 1, N] V0 of each body j
     v0[..., P:] = cfg.robot_social_strength
     social = (w * v0 / cfg.social_range * torch.exp(-b / cfg.social_range))[..., None] * grad_b
+    # the robot is also an obstacle: the 1995 model's border repulsion U0/R exp(-gap/R), seen all around (a person
+    # does not walk into a standing machine it has just passed, nor let a neighbour push it there)
+    R = cfg.robot_obstacle_range
+    border = (cfg.robot_obstacle_strength / R * torch.exp(-edge[..., P:] / R))[..., None] * n[:, :, P:]  # [B, P, N-P, 2]
+    social = torch.cat([social[:, :, :P], social[:, :, P:] + border], 2)
     # physical: body compression and sliding friction where bodies overlap
     contact = (rsum - dist).clamp_min(0.0)  # g(r_ij - d_ij) [B, P, N]
     dv_t = ((vel[:, None, :, :] - vel[:, :P, None, :]) * t).sum(-1)
