@@ -31,7 +31,7 @@ def run(cfg: DictConfig) -> dict:
     out = Path(c.out) if c.out is not None else hydra_output_dir()
     res = run_benchmark(c, out)
     print(res["table"], flush=True)
-    print(f"wrote {out / 'table.txt'}, results.csv, timing.json and runs/")
+    print(f"wrote {out / 'table.txt'}, results.csv, table.png, timing.json and runs/")
     return res
 
 

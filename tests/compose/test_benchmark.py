@@ -35,7 +35,7 @@ def test_references_and_an_external_policy_on_the_point_goal_task(prepared_demo_
     assert [r["episode_id"] for r in recs] == [r["episode_id"] for r in res["results"][("pointgoal", "expert")]]
     assert sum(r["success"] for r in res["results"][("pointgoal", "expert")]) == 4  # the privileged upper bound
     csv = (tmp_path / "results.csv").read_text().splitlines()
-    assert csv[0] == "task,policy,group,N,column,mean,low,high,policy_errors" and len(csv) > 10
+    assert csv[0] == "task,policy,scene,group,N,column,mean,low,high,policy_errors" and len(csv) > 10
     stored = json.loads((tmp_path / "runs" / "pointgoal" / "straight.json").read_text())
     assert stored["policy"]["target"] == GOAL and len(stored["records"]) == 4
     # a rerun reuses every stored evaluation: same records, nothing re-evaluated (the file is untouched)
@@ -132,3 +132,49 @@ def test_a_served_policy_runs_like_the_same_policy_in_process(prepared_demo_scen
         server.shutdown()
         server.server_close()
     assert res["results"][("pointgoal", "remote")] == res["results"][("pointgoal", "local")]
+
+
+def test_a_scene_set_has_per_scene_and_pooled_rows_resumes_per_scene_and_draws_the_chart(demo_episodes, tmp_path):
+    import csv
+
+    root = tmp_path / "set"  # two links to the prepared demo: a set in seconds (tests/scale builds real seeds)
+    root.mkdir()
+    for name in ("a", "b"):
+        (root / name).symlink_to(demo_episodes.parent, target_is_directory=True)
+    scene = ["scene=demo_set", "scene.set.seeds=null", f"scene.set.manifest={root}", f"scene.set.root={root}",
+             "scene.set.backend=serial"]
+    pol = f"[{{name: expert, reference: expert}}, {{name: straight, target: '{GOAL}'}}]"
+    cfg = compose_config("benchmark", [*scene, FIXTURE_NAV, f"out={tmp_path / 'out'}", "progress=false", "batch_size=4",
+                                       "num_episodes=4", "env.termination.max_steps=60", f"policies={pol}",
+                                       "tasks=[pointgoal,instruction]"])
+    res = run(cfg)
+    recs = res["results"][("pointgoal", "straight")]
+    assert len(recs) == 8 and [r["scene_id"] for r in recs] == ["a"] * 4 + ["b"] * 4
+    for sid in ("a", "b"):
+        stored = json.loads((tmp_path / "out" / "runs" / "pointgoal" / "straight" / f"{sid}.json").read_text())
+        assert stored["scene"] == sid and len(stored["records"]) == 4
+    assert "pointgoal/straight/a " in res["table"] and "pointgoal/straight/b " in res["table"]
+    assert "pointgoal/straight - pointgoal/expert" in res["table"] and "scene set demo_set (2 scenes: a, b)" in res["table"]
+    lines = list(csv.DictReader((tmp_path / "out" / "results.csv").open()))
+    sr = {(r["task"], r["policy"], r["scene"], r["group"]): r for r in lines if r["column"] == "SR"}
+    indoor_outdoor = {g for (_, _, s, g) in sr if s == "all"} - {"overall"}
+    assert indoor_outdoor and indoor_outdoor <= {"indoor", "outdoor"}
+    # rows: 3 fitted (task, policy) pairs, each pooled (overall + its groups) and per scene
+    assert {(t, p) for (t, p, _, _) in sr} == {("pointgoal", "expert"), ("pointgoal", "straight"), ("instruction", "expert")}
+    assert all({(t, p, s, "overall") for s in ("all", "a", "b")} <= set(sr) for (t, p, _, _) in sr)
+    pooled, a = sr[("pointgoal", "straight", "all", "overall")], sr[("pointgoal", "straight", "a", "overall")]
+    assert int(pooled["N"]) == 8 and int(a["N"]) == 4
+    assert float(pooled["mean"]) == pytest.approx(np.mean([r["success"] for r in recs]))
+    assert sum(int(sr[("pointgoal", "straight", "all", g)]["N"]) for g in indoor_outdoor) == 8
+    png = tmp_path / "out" / "table.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+    # one scene's stored evaluation lost: only that one is run again
+    keep = (tmp_path / "out" / "runs" / "pointgoal" / "straight" / "a.json").stat().st_mtime_ns
+    (tmp_path / "out" / "runs" / "pointgoal" / "straight" / "b.json").unlink()
+    again = run(cfg)
+    assert again["results"] == res["results"]
+    assert (tmp_path / "out" / "runs" / "pointgoal" / "straight" / "a.json").stat().st_mtime_ns == keep
+    assert set(again["seconds"]) == {f"{t}/{p}/{s}" for t, p in [("pointgoal", "expert"), ("pointgoal", "straight"),
+                                                                  ("instruction", "expert")] for s in ("a", "b")}
+    with pytest.raises(ValueError, match="names one scene's file"):
+        run(compose_config("benchmark", [*scene, f"out={tmp_path / 'x'}", f"episodes={demo_episodes}"]))

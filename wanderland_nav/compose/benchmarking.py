@@ -1,9 +1,12 @@
 """`benchmark`'s composition: a list of policies (package checkpoints, references, external classes, remote
-servers) evaluated on every task of a scene, the same routes for all, one table with intervals.
+servers) evaluated on every task of a scene or scene set, the same routes for all, one table with intervals.
 
-Each (policy, task) evaluation is stored as `<out>/runs/<task>/<policy>.json` with a key over everything it
-depends on (the policy's spec, the task, the env config, the scene and episodes files, split, seed, episode
-count); a rerun reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy.
+Each (policy, task) evaluation is stored as `<out>/runs/<task>/<policy>.json` (a scene set: one
+`<out>/runs/<task>/<policy>/<scene_id>.json` per scene) with a key over everything it depends on (the
+policy's spec, the task, the env config, the scene and episodes files, split, seed, episode count); a rerun
+reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy and scene.
+Beside `table.txt` and `results.csv` it draws `table.png`: SR with its interval per task, indoor / outdoor,
+one bar per policy (the paper's Table 4 as a chart).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from wanderland_nav.compose.build import (blind_env_config, env_factory, load_na
 from wanderland_nav.compose.comparison import stored_env_config
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
+from wanderland_nav.compose.scene_sets import ready_scene_set
 from wanderland_nav.compose.schema import BenchmarkConfig
 from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
 from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
@@ -35,8 +39,10 @@ from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.external import ExternalActor, RemotePolicy, load_target
 from wanderland_nav.report import comparison_table, row_estimates
 from wanderland_nav.rl.route_goal import with_goal_input
+from wanderland_nav.scene import load_scene
 from wanderland_nav.tasks import SUCCESS_RULE, check_reads, check_task_episodes, hidden_reads, make_task, \
     task_env_config
+from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.benchmark")
 SOURCES = ("reference", "checkpoint", "target", "url")
@@ -144,29 +150,51 @@ def run_key(entry: Entry, task, c: BenchmarkConfig, scene_part: dict) -> str:
                         "max_consecutive_failures": c.max_consecutive_failures})
 
 
-def grouped_rows(results: dict) -> dict[str, list[dict]]:
-    """`{(task label, policy): records}` -> table rows `task/policy` (overall) and `task/policy/indoor|outdoor`."""
+ALL_SCENES = "all"
+
+
+def grouped_rows(results: dict, per_scene: bool = False) -> dict[tuple[str, str, str, str], list[dict]]:
+    """`{(task label, policy): records}` (each record with its `scene_id`) -> table rows keyed
+    `(task, policy, scene, group)`: pooled over the scenes (`scene="all"`) overall, indoor and outdoor, then
+    (`per_scene`) one overall row per scene."""
     rows = {}
     for (task, name), records in results.items():
-        rows[f"{task}/{name}"] = records
+        rows[(task, name, ALL_SCENES, GROUPS[0])] = records
         for group in GROUPS[1:]:
             sub = [r for r in records if r.get("environment") == group]
             if sub:
-                rows[f"{task}/{name}/{group}"] = sub
+                rows[(task, name, ALL_SCENES, group)] = sub
+        if per_scene:
+            for sid in dict.fromkeys(r["scene_id"] for r in records):
+                rows[(task, name, sid, GROUPS[0])] = [r for r in records if r["scene_id"] == sid]
     return rows
 
 
-def results_csv(rows: dict[str, list[dict]]) -> str:
-    """One line per (task, policy, group): N and each column's mean with its 95 % interval."""
+def row_label(key: tuple[str, str, str, str]) -> str:
+    """`(task, policy, scene, group)` -> `task/policy[/scene][/group]` (the pooled scene and `overall` unnamed)."""
+    task, name, scene, group = key
+    return "/".join([task, name] + ([scene] if scene != ALL_SCENES else []) + ([group] if group != GROUPS[0] else []))
+
+
+def results_csv(rows: dict[tuple[str, str, str, str], list[dict]]) -> str:
+    """One line per (task, policy, scene, group): N and each column's mean with its 95 % interval."""
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["task", "policy", "group", "N", "column", "mean", "low", "high", "policy_errors"])
-    for row, records in rows.items():
-        task, name, *group = row.split("/")
+    w.writerow(["task", "policy", "scene", "group", "N", "column", "mean", "low", "high", "policy_errors"])
+    for key, records in rows.items():
         errors = sum(bool(r.get("policy_error")) for r in records)
         for col, e in row_estimates(records).items():
-            w.writerow([task, name, group[0] if group else "overall", len(records), col, e.value, e.low, e.high, errors])
+            w.writerow([*key, len(records), col, e.value, e.low, e.high, errors])
     return buf.getvalue()
+
+
+def sr_chart(rows: dict[tuple[str, str, str, str], list[dict]]) -> dict:
+    """The chart's estimates, pooled over scenes: task -> group -> policy -> SR with its interval."""
+    chart: dict = {}
+    for (task, name, scene, group), records in rows.items():
+        if scene == ALL_SCENES:
+            chart.setdefault(task, {}).setdefault(group, {})[name] = row_estimates(records, ("SR",))["SR"]
+    return chart
 
 
 def failure_lines(results: dict) -> list[str]:
@@ -180,20 +208,32 @@ def failure_lines(results: dict) -> list[str]:
     return lines
 
 
+def benchmark_scenes(c: BenchmarkConfig) -> tuple[str, list[tuple[str, Any, Path]]]:
+    """(header name, `[(scene_id, scene, episodes file)]`): the one scene, or every ready scene of `scene.set`
+    (prepared and given episodes on demand, as `train` and `evaluate` do), each with its own `episodes.json`."""
+    if not c.scene.set:
+        scene = prepared_scene(c.scene, c.navigation)
+        scene, episodes = scene_episodes(scene, c.episodes, num=c.demo_episodes, seed=c.seed,
+                                         generator=GeneratorSettings(goal_images=False))
+        return scene.name, [(scene.name, scene, episodes)]
+    if c.episodes is not None:
+        raise ValueError(f"benchmark: episodes={c.episodes} names one scene's file; scene set {c.scene.name!r} "
+                         f"evaluates each scene's own episodes.json")
+    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.demo_episodes, seed=c.seed, goal_images=False)
+    scenes = [(sid, load_scene(p)) for sid, p in paths.items()]
+    return (f"scene set {c.scene.name} ({len(scenes)} scenes: {', '.join(paths)})",
+            [(sid, s, s.products / "episodes.json") for sid, s in scenes])
+
+
 def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
-    """Every policy on every task it fits; -> `{"table", "results", "skipped", "seconds"}` (also written to `out`)."""
-    if c.scene.set:
-        raise ValueError(f"benchmark: scene set {c.scene.name!r}: the benchmark runs one scene; name one of the set's "
-                         f"folders (scene={c.scene.path})")
+    """Every policy on every task it fits, on every scene; -> `{"table", "results", "rows", "skipped", "seconds"}`
+    (also written to `out`: table.txt, results.csv, table.png, timing.json, runs/)."""
     tasks = [make_task(t, c.pointgoal_input) for t in c.tasks]
     entries = policy_entries(c)
     baseline = c.baseline or entries[0].name
     if baseline not in {e.name for e in entries}:
         raise ValueError(f"benchmark baseline={baseline!r}: not among the policies {[e.name for e in entries]}")
-    scene = prepared_scene(c.scene, c.navigation)
-    scene, episodes = scene_episodes(scene, c.episodes, num=c.demo_episodes, seed=c.seed,
-                                     generator=GeneratorSettings(goal_images=False))
-    scene_part, navmesh = scene_identity(scene.root, episodes), load_navmesh(scene)
+    header, scenes = benchmark_scenes(c)
     results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
     for task in tasks:
         for entry in entries:
@@ -206,27 +246,38 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
                     and {keys.GOAL_VECTOR, keys.GOAL_POSE} & set(entry.reads):
                 skipped.append(f"{task.label}/{entry.name}: trained with goal_input={entry.trained_goal_input}, "
                                f"evaluated with goal_input={task.goal_input} (pointgoal_input)")
-            key = run_key(entry, task, c, scene_part)
-            path = out / "runs" / task.label / f"{entry.name}.json"
-            stored = json.loads(path.read_text()) if path.is_file() else {}
-            if stored.get("key") != key:
-                stored = {"key": key, "policy": entry.spec, "task": task.label, **_evaluate(entry, task, c, scene,
-                                                                                            episodes, navmesh)}
-                atomic_write_json(path, stored)
-            else:
-                log.info("%s/%s: stored evaluation reused (%s)", task.label, entry.name, path)
-            results[(task.label, entry.name)] = stored["records"]
-            seconds[f"{task.label}/{entry.name}"] = stored["seconds"]
+            results[(task.label, entry.name)] = []
+    for sid, scene, episodes in scenes:  # scene by scene: one scene's navmesh and splat loaded at a time
+        scene_part, navmesh = scene_identity(scene.root, episodes), load_navmesh(scene)
+        for task in tasks:
+            for entry in entries:
+                if (task.label, entry.name) not in results:
+                    continue
+                # one file per evaluation: an interrupted benchmark resumes per task, policy and scene
+                name = f"{entry.name}.json" if not c.scene.set else f"{entry.name}/{sid}.json"
+                path = out / "runs" / task.label / name
+                key = run_key(entry, task, c, scene_part)
+                stored = json.loads(path.read_text()) if path.is_file() else {}
+                if stored.get("key") != key:
+                    stored = {"key": key, "policy": entry.spec, "task": task.label, "scene": sid,
+                              **_evaluate(entry, task, c, scene, episodes, navmesh)}
+                    atomic_write_json(path, stored)
+                else:
+                    log.info("%s/%s on %s: stored evaluation reused (%s)", task.label, entry.name, sid, path)
+                results[(task.label, entry.name)] += [{**r, "scene_id": sid} for r in stored["records"]]
+                seconds[f"{task.label}/{entry.name}" + (f"/{sid}" if c.scene.set else "")] = stored["seconds"]
     for e in entries:
         close = getattr(e.actor, "close", None)
         if close is not None:
             close()
-    rows = grouped_rows(results)
+    rows = grouped_rows(results, per_scene=len(scenes) > 1)
     pairs = [(f"{t}/{n}", f"{t}/{baseline}") for (t, n) in results if n != baseline and (t, baseline) in results]
-    table = "\n".join([f"{scene.name}: split {c.split}, success: {SUCCESS_RULE}",
-                       comparison_table(rows, pairs=pairs), *failure_lines(results), *skipped])
+    pooled = "" if len(scenes) == 1 else "; rows without a scene pool every scene's episodes"
+    table = "\n".join([f"{header}: split {c.split}, success: {SUCCESS_RULE}{pooled}",
+                       comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs),
+                       *failure_lines(results), *skipped])
     atomic_write_text(out / "table.txt", table + "\n")
     atomic_write_text(out / "results.csv", results_csv(rows))
+    write_study_chart(out / "table.png", sr_chart(rows), title=header, value_label="SR")
     atomic_write_json(out / "timing.json", seconds)
-    return {"table": table, "results": results, "skipped": skipped, "seconds": seconds}
-
+    return {"table": table, "results": results, "rows": rows, "skipped": skipped, "seconds": seconds}

@@ -1,6 +1,7 @@
-"""The grounding study's Fig.-8-like bar chart: SR and IR of fixed policies in each environment.
+"""Grouped bar charts of rates with their intervals: the grounding study's Fig.-8-like chart (SR and IR of
+fixed policies in each environment) and the benchmark's Table-4-like chart (SR per task, indoor / outdoor).
 
-One panel per metric; a group of bars per environment (grounded first), one bar per policy, with the
+One panel per key (a metric, or a task), a group of bars per environment, one bar per policy, with the
 95 % interval of each estimate as its error bar. Input is plain estimates (`value`, `low`, `high`), so
 the chart knows nothing about how they were computed.
 """
@@ -18,8 +19,9 @@ from wanderland_nav.atomic import atomic_path
 
 
 def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[str, object]]],
-                      title: str = "") -> Path:
-    """`chart`: metric -> env -> policy -> estimate with `.value/.low/.high`. Writes a PNG at `out`."""
+                      title: str = "", value_label: str = "") -> Path:
+    """`chart`: panel (metric or task) -> env -> policy -> estimate with `.value/.low/.high`; `value_label`
+    names the drawn quantity when the panels are not metrics. Writes a PNG at `out`."""
     matplotlib.use("Agg")
     metrics = [m for m, per_env in chart.items() if per_env]
     if not metrics:
@@ -42,7 +44,7 @@ def write_study_chart(out: str | Path, chart: Mapping[str, Mapping[str, Mapping[
         n = [max((e.n for e in chart[m].get(env, {}).values()), default=0) for env in envs]
         ax.set_xticks(x, [f"{env}\n(n={k})" for env, k in zip(envs, n)], rotation=25, ha="right", fontsize=8)
         ax.set_ylim(0, 1)
-        ax.set_title(f"{m} (95 % CI)")
+        ax.set_title(f"{m}: {value_label} (95 % CI)" if value_label else f"{m} (95 % CI)")
         ax.grid(axis="y", alpha=0.3)
     # below the axes, not over them: the bars reach 1.0 in every corner of an SR panel
     handles, labels = axes[0][0].get_legend_handles_labels()
