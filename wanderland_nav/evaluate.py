@@ -16,11 +16,10 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose import (blind_env_config, env_factory, load_navmesh, prepared_scene, run_identity,
                                     scene_episodes, scene_gaussians, scene_identity, scene_overrides, typed_config)
 from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
-from wanderland_nav.compose.comparison import compare_checkpoints
+from wanderland_nav.compose.comparison import compare_checkpoints, write_comparison
 from wanderland_nav.compose.evaluating import reference_policy, run_scene_set
 from wanderland_nav.compose.schema import EvaluateConfig
 from wanderland_nav.envs.evaluation import write_results
@@ -48,9 +47,7 @@ def run(cfg: DictConfig):
         print(f"{scene.name}: split {split}\n{table}", flush=True)
         if c.save_rollouts:
             print(f"wrote one rollout per checkpoint to {c.save_rollouts}")
-        atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
-                                                          "summary": {k: r.summary for k, r in results.items()},
-                                                          "records": {k: r.records for k, r in results.items()}})
+        write_comparison(out, rows, table, results, identity["hash"])
         return rows
     env_cfg = c.env
     if env_cfg.camera.enabled and not c.render_for_reference:

@@ -13,6 +13,7 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
+from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
 from wanderland_nav.compose.scene_sets import scene_env_fn
 from wanderland_nav.compose.schema import typed_config
@@ -90,3 +91,13 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table
+
+
+def write_comparison(out: Path, rows: dict, table: str, results: dict, identity_hash: str) -> Path:
+    """`<out>/eval_checkpoints.json`: the rows, the printed table, each checkpoint's summary and its per-episode
+    records (what paired differences across runs need), and the run identity."""
+    path = Path(out) / "eval_checkpoints.json"
+    atomic_write_json(path, {"rows": rows, "table": table, "identity": identity_hash,
+                             "summary": {k: r.summary for k, r in results.items()},
+                             "records": {k: r.records for k, r in results.items()}})
+    return path

@@ -7,10 +7,9 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.compose.build import blind_env_config
 from wanderland_nav.compose.cli import hydra_output_dir
-from wanderland_nav.compose.comparison import compare_checkpoints
+from wanderland_nav.compose.comparison import compare_checkpoints, write_comparison
 from wanderland_nav.compose.identity import run_identity
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import EvaluateConfig
@@ -45,9 +44,7 @@ def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
                                                    device=c.device, seed=c.seed, progress=c.progress, scene_set=paths,
                                                    pedestrians=c.env.pedestrians)
         print(f"set {c.scene.name} ({len(paths)} scenes): split {split}\n{table}", flush=True)
-        atomic_write_json(out / "eval_checkpoints.json", {"rows": rows, "table": table, "identity": identity["hash"],
-                                                          "summary": {k: r.summary for k, r in results.items()},
-                                                          "records": {k: r.records for k, r in results.items()}})
+        write_comparison(out, rows, table, results, identity["hash"])
         return rows
     env_cfg = c.env if c.render_for_reference else blind_env_config(c.env)
     policy = partial(reference_policy, c)

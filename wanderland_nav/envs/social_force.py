@@ -59,8 +59,7 @@ def interaction_acceleration(pos: torch.Tensor, vel: torch.Tensor, radius: torch
     # the robot is also an obstacle: the 1995 model's border repulsion U0/R exp(-gap/R), seen all around (a person
     # does not walk into a standing machine it has just passed, nor let a neighbour push it there)
     R = cfg.robot_obstacle_range
-    border = (cfg.robot_obstacle_strength / R * torch.exp(-edge[..., P:] / R))[..., None] * n[:, :, P:]  # [B, P, N-P, 2]
-    social = torch.cat([social[:, :, :P], social[:, :, P:] + border], 2)
+    social[:, :, P:] += (cfg.robot_obstacle_strength / R * torch.exp(-edge[..., P:] / R))[..., None] * n[:, :, P:]
     # physical: body compression and sliding friction where bodies overlap
     contact = (rsum - dist).clamp_min(0.0)  # g(r_ij - d_ij) [B, P, N]
     dv_t = ((vel[:, None, :, :] - vel[:, :P, None, :]) * t).sum(-1)
