@@ -119,3 +119,25 @@ def test_on_round_end_sees_each_rounds_weights_in_order():
     assert all(torch.equal(v, seen[-1][1][n]) for n, v in p.state_dict().items())
     changed = [n for n, v in seen[0][1].items() if v.is_floating_point() and not torch.equal(v, seen[1][1][n])]
     assert changed, "round 2 left every weight of round 1 unchanged"
+
+
+def test_round_log_states_the_training_fit_only_when_the_loss_reports_it(caplog):
+    """A diffusion head's loss is a noise MSE and reports no waypoint L1: its round line must omit the training
+    fit, not print it as NaN."""
+    env = FakeNavEnv((4,), num_waypoints=5)
+    paths = ExpertPaths(list(env.goal_paths().numpy()))
+    cfg = BCConfig(rounds=1, env_steps_per_round=6, updates_per_round=2, batch_size=16, heldout_every=2)
+    lines = []
+    for drop in (False, True):
+        torch.manual_seed(0)
+        p = make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32)
+        if drop:
+            fit = p.bc_loss
+            p.bc_loss = lambda td, label: (lambda out: (out[0], {k: v for k, v in out[1].items()
+                                                                 if k != "waypoint_l1"}))(fit(td, label))
+        caplog.clear()
+        with caplog.at_level("INFO", logger="wanderland_nav.rl.bc"):
+            train_bc(p, env, paths, cfg, progress=False)
+        lines.append(next(r.getMessage() for r in caplog.records if r.getMessage().startswith("BC round 0")))
+    assert "train L1 " in lines[0] and "held-out L1" in lines[0]
+    assert "train L1" not in lines[1] and "nan" not in lines[1] and "held-out L1" in lines[1]
