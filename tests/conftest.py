@@ -127,3 +127,44 @@ def entry_point():
         return module.run(OmegaConf.to_container(cfg, resolve=True) if name == "recon_eval" else cfg)
 
     return run
+
+
+def python_blocks(page: str) -> list[str]:
+    """The ```python blocks of a docs page (`page` relative to the repository), in order."""
+    import re
+
+    return re.findall(r"```python\n(.*?)```", (REPO / page).read_text(), re.S)
+
+
+def _merged(a: dict, b: dict) -> dict:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = _merged(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+@pytest.fixture
+def run_snippet(monkeypatch):
+    """`run_snippet(code, **scene_kwargs)` executes a snippet as the docs write it, with every
+    `make_env("demo", ...)` it reaches (`wanderland_nav.make_env`, the Gymnasium env's, a worker's through a
+    pickled `partial`) given `scene_kwargs` first (the test's tiny scene; the snippet's own keywords win, nested
+    dicts merged). Returns the snippet's namespace."""
+    import textwrap
+
+    import wanderland_nav
+    import wanderland_nav.compose.make_env as module
+
+    real = module.make_env
+
+    def run(code: str, **scene_kwargs):
+        def make_env(scene="demo", **kw):
+            assert scene == "demo", scene
+            return real(**_merged(scene_kwargs, kw))
+
+        monkeypatch.setitem(wanderland_nav.__dict__, "make_env", make_env)
+        monkeypatch.setattr(module, "make_env", make_env)
+        scope = {"__name__": "__snippet__"}
+        exec(textwrap.dedent(code), scope)
+        return scope
+
+    return run
