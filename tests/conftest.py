@@ -129,20 +129,6 @@ def entry_point():
     return run
 
 
-def python_blocks(page: str) -> list[str]:
-    """The ```python blocks of a docs page (`page` relative to the repository), in order."""
-    import re
-
-    return re.findall(r"```python\n(.*?)```", (REPO / page).read_text(), re.S)
-
-
-def _merged(a: dict, b: dict) -> dict:
-    out = dict(a)
-    for k, v in b.items():
-        out[k] = _merged(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
 @pytest.fixture
 def run_snippet(monkeypatch):
     """`run_snippet(code, **scene_kwargs)` executes a snippet as the docs write it, with every
@@ -153,13 +139,14 @@ def run_snippet(monkeypatch):
 
     import wanderland_nav
     import wanderland_nav.compose.make_env as module
+    from doc_snippets import merged
 
     real = module.make_env
 
     def run(code: str, **scene_kwargs):
         def make_env(scene="demo", **kw):
             assert scene == "demo", scene
-            return real(**_merged(scene_kwargs, kw))
+            return real(**merged(scene_kwargs, kw))
 
         monkeypatch.setitem(wanderland_nav.__dict__, "make_env", make_env)
         monkeypatch.setattr(module, "make_env", make_env)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from conftest import python_blocks
+from doc_snippets import python_blocks
 
 gymnasium = pytest.importorskip("gymnasium", reason="the gym extra (pip install -e '.[gym]') is not installed")
 

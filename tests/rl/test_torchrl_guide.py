@@ -8,7 +8,7 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from conftest import python_blocks
+from doc_snippets import python_blocks
 from wanderland_nav import keys as K
 
 pytestmark = pytest.mark.usefixtures("one_thread")
