@@ -22,8 +22,21 @@ def demo(demo_episodes):
     return dict(scene=str(demo_episodes.parent), debug="smoke", navigation={"prepare": False})
 
 
-def test_the_page_is_in_the_site_nav():
-    assert "guide/torchrl.md" in (Path(__file__).resolve().parents[2] / "mkdocs.yml").read_text()
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_the_page_is_in_the_site_nav_and_the_reference_covers_what_it_uses():
+    assert "guide/torchrl.md" in (REPO / "mkdocs.yml").read_text()
+    envs, rl = (REPO / "docs/reference/envs.md").read_text(), (REPO / "docs/reference/rl.md").read_text()
+    assert "::: wanderland_nav.compose.make_env" in envs and "::: wanderland_nav.gym" in envs
+    assert "::: wanderland_nav.rl.torchrl_modules" in rl
+    import dataclasses
+
+    from wanderland_nav.compose.make_env import make_env
+    from wanderland_nav.compose.schema import MakeEnvConfig
+
+    undocumented = [f.name for f in dataclasses.fields(MakeEnvConfig) if f"`{f.name}`" not in make_env.__doc__]
+    assert not undocumented, f"make_env's docstring does not name {undocumented}"
 
 
 def test_observation_spec_holds_the_policy_inputs_and_the_metrics_are_step_outputs(run_snippet, demo, capsys):
