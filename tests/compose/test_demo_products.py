@@ -46,3 +46,21 @@ def test_make_env_without_a_policy_has_the_main_jobs_camera():
     from wanderland_nav.compose.make_env import make_env
 
     assert "32 x 32 px" in make_env.__doc__ and "2-px" in make_env.__doc__
+
+
+def test_a_smoke_study_builds_its_source_beside_the_main_jobs_demo(monkeypatch, tmp_path):
+    """The study's train cells prepare `scene=<source folder>` with the recipe's navigation: the source folder is
+    the one that navigation keys, never the main job's `demo_tiny` (which the smoke voxels would re-bake)."""
+    import wanderland_nav.compose.scene as scene
+    from wanderland_nav.compose.schema import study_config
+    from wanderland_nav.grounding_study.cells import StudyCells
+    from wanderland_nav.grounding_study.plan import plan_cells
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(scene, "make_demo_scene", lambda path, **kw: Path(path).mkdir(parents=True, exist_ok=True))
+    folders = {}
+    for name, overrides in (("smoke", ["+study=grounding", "debug=smoke"]), ("full", ["+study=grounding"])):
+        c = study_config(compose_config("study", overrides))
+        folders[name] = StudyCells(c, tmp_path / name, None, plan_cells(c.study)).source()
+    assert folders["full"] == tmp_path / "data/scenes/demo_tiny"
+    assert folders["smoke"].name.startswith("demo_tiny_nav")
