@@ -220,9 +220,13 @@ def test_cuda_env_steps_on_the_gpu(demo):
     td = env.rollout(3)
     assert td.device.type == "cuda" and td["next", K.RGB].is_cuda and env._pos.is_cuda
     assert env.camera.gaussians.means.is_cuda and env.table.goal_position.is_cuda
-    cpu = wanderland_nav.make_env(batch_size=2, **demo).to("cuda")
+    cpu = wanderland_nav.make_env(batch_size=2, env={"expert_action": True}, **demo)
+    cpu.rollout(2, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))  # the expert's progress exists, on the CPU
+    cpu = cpu.to("cuda")
     assert cpu._pos.is_cuda and cpu.camera.K.is_cuda and cpu.camera.gaussians.means.is_cuda
-    assert cpu.rollout(3)["next", K.PIXELS].is_cuda
+    assert cpu.expert._progress.is_cuda and cpu.expert.paths.is_cuda
+    td = cpu.rollout(3, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))
+    assert td["next", K.PIXELS].is_cuda and td["next", K.EPISODE, "spl"].is_cuda
 
 
 def test_pixels_give_video_recorder_one_frame_per_step(demo, tmp_path):
