@@ -127,3 +127,31 @@ def entry_point():
         return module.run(OmegaConf.to_container(cfg, resolve=True) if name == "recon_eval" else cfg)
 
     return run
+
+
+@pytest.fixture
+def run_snippet(monkeypatch):
+    """`run_snippet(code, **scene_kwargs)` executes a snippet as the docs write it, with every
+    `make_env("demo", ...)` it reaches (`wanderland_nav.make_env`, the Gymnasium env's, a worker's through a
+    pickled `partial`) given `scene_kwargs` first (the test's tiny scene; the snippet's own keywords win, nested
+    dicts merged). Returns the snippet's namespace."""
+    import textwrap
+
+    import wanderland_nav
+    import wanderland_nav.compose.make_env as module
+    from doc_snippets import merged
+
+    real = module.make_env
+
+    def run(code: str, **scene_kwargs):
+        def make_env(scene="demo", **kw):
+            assert scene == "demo", scene
+            return real(**merged(scene_kwargs, kw))
+
+        monkeypatch.setitem(wanderland_nav.__dict__, "make_env", make_env)
+        monkeypatch.setattr(module, "make_env", make_env)
+        scope = {"__name__": "__snippet__"}
+        exec(textwrap.dedent(code), scope)
+        return scope
+
+    return run

@@ -4,9 +4,12 @@ scene folder -> Scene -> collision mesh -> NavMesh -> episodes.json -> NavEnv ->
 with Gaussians -> render() as the camera and rerun as the eyes. See ARCHITECTURE.md.
 
 `wanderland_nav.make_env(scene="demo")` is the one-call TorchRL environment (`compose/make_env.py`);
-it is imported on first use, so `import wanderland_nav` stays free of Hydra and TorchRL.
+it is imported on first use, so `import wanderland_nav` stays free of torch, Hydra and TorchRL. Where
+Gymnasium is installed (the `gym` extra), `import wanderland_nav` registers `WanderlandNav-v0`
+(`wanderland_nav/gym.py`: Gymnasium and numpy only; the env is built on the first `gymnasium.make`).
 """
 
+import importlib.util
 import os
 
 # Before torch (and its OpenMP runtime) loads, which every entry point does after importing this package:
@@ -16,6 +19,9 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
+
+if importlib.util.find_spec("gymnasium") is not None:  # Gymnasium 1.x reads no plugin entry points
+    from wanderland_nav import gym as _gym  # noqa: E402,F401  registers WanderlandNav-v0
 
 
 def __getattr__(name):

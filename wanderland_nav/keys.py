@@ -23,15 +23,20 @@ only when the env is built for them (`NavEnvConfig` and the task's episodes)::
     privileged/?                                              ground truth: experts, BC labels, logs (privileged: true)
         episode_index, step_count, agent_position, agent_yaw,
         distance_to_goal, success, intervention, collision
-    episode/?                                                 the running episode's metrics, final at done
-        success, spl, navigation_error, path_length,          (episode_metrics: true)
-        shortest_length, steps, collisions, intervention
     action                                                    written by the policy
     reward, done, terminated, truncated                       step outputs (in "next")
+    episode/?                                                 step outputs (in "next" only): the running
+        success, spl, navigation_error, path_length,          episode's metrics, final at done
+        shortest_length, steps, collisions, intervention      (episode_metrics: true)
 
-`privileged/`, `episode/` and `expert_action` are in the observation spec because TorchRL carries every
-per-step env output there (`step_mdp` moves exactly those keys to the root); they are never policy
-inputs. `wanderland_nav.make_env` builds the policy-facing env: no `privileged/`, metrics on.
+The policy inputs are `OBSERVATION_KEYS` (and `depth`). `privileged/`, `expert_action` and `pixels` are in the
+observation spec too, because they must reach the next step's root (`step_mdp` moves exactly the observation
+and done keys there): the expert and BC read the truth at the root, video reads `pixels`; none is a policy
+input. `episode/` is in the reward spec: like the reward it exists in `("next", ...)` only, is never returned by
+a reset and is never carried to the next step's root (the env's `step_mdp` drops reward keys; in the done
+spec TorchRL would OR every leaf into `done`). Name the reward
+where TorchRL wants one key: `RewardSum(in_keys=["reward"])`, `env.full_reward_spec["reward"]`.
+`wanderland_nav.make_env` builds the policy-facing env: no `privileged/`, metrics on.
 """
 
 # --------------------------------------------------------------------------- observations
@@ -101,9 +106,10 @@ COLLISION = (PRIVILEGED, "collision")
 
 # --------------------------------------------------------------------------- episode metrics
 EPISODE = "episode"
-"""Sub-TensorDict of the running episode's metrics (`NavEnvConfig.episode_metrics`): updated every step,
-so at `("next", "done")` it holds the finished episode's final values; a reset zeroes it. What
-collectors and loggers read (the paper's NE / SR / SPL); never a policy input."""
+"""Sub-TensorDict of the running episode's metrics (`NavEnvConfig.episode_metrics`), a step output in the reward
+spec: every step's `("next", "episode")` holds them, so at `("next", "done")` the finished episode's final values;
+a reset starts them from zero and returns none. What collectors and loggers read (the paper's NE / SR / SPL);
+never a policy input."""
 
 EPISODE_SUCCESS = (EPISODE, "success")
 """bool `[1]`: the episode succeeded (so far: False until the step that ends it within the goal radius)."""
@@ -200,8 +206,8 @@ OBSERVATION_KEYS = (
 """Keys a policy may read (plus `DEPTH` when enabled), each present only when the env carries it: no
 `RGB` / `DEPTH` with the camera off, no `GOAL_IMAGE` / `HAS_GOAL_IMAGE` unless an episode has a goal view
 (or `NavEnvConfig.observe_goal_image`), no `INSTRUCTION_TOKENS` unless an episode has an instruction (or
-`observe_instruction`). The rest of the observation spec is `PIXELS`, `EXPERT_ACTION`, `PRIVILEGED` and
-`EPISODE` (see the key tree above)."""
+`observe_instruction`). The rest of the observation spec is `PIXELS`, `EXPERT_ACTION` and `PRIVILEGED`, each
+when the env is built for it; `EPISODE` is in the reward spec (see the key tree above)."""
 
 PRIVILEGED_KEYS = (EPISODE_INDEX, STEP_COUNT, AGENT_POSITION, AGENT_YAW, DISTANCE_TO_GOAL, SUCCESS, INTERVENTION,
                    COLLISION)

@@ -28,7 +28,7 @@ TINY_POLICY = dict(encoder="cnn", image_size=(32, 32), dim=16, depth=1, heads=2)
 QUICK_START = '''
 import wanderland_nav
 env = wanderland_nav.make_env("demo", batch_size=4)  # the tiny demo: built, prepared, episodes made on first use
-td = env.rollout(20)                                  # random waypoints, [4, 20]; auto-resets at done
+td = env.rollout(200, break_when_any_done=False)      # random waypoints, [4, 200]; a done agent starts its next episode
 print(td["next", "reward"].shape, td["next", "episode", "spl"][td["next", "done"]])  # SPL of finished episodes
 '''
 
@@ -88,8 +88,22 @@ def test_readme_shows_these_snippets():
 def test_readme_quick_start_runs(demo, capsys):
     scope = _snippet(QUICK_START, demo)
     td = scope["td"]
-    assert td.batch_size == (4, 20) and "torch.Size([4, 20, 1])" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert td.batch_size == (4, 200) and "torch.Size([4, 200, 1])" in out
     assert K.PRIVILEGED not in td.keys() and K.PIXELS in td.keys()
+    done = td["next", "done"].squeeze(-1)
+    assert (done.sum(1) >= 2).all()  # every agent finished episodes and went on: auto-resets at done
+    restarted = td["next", K.EPISODE, "steps"][:, 1:][done[:, :-1]]  # the step after a done: a fresh episode's first
+    assert (restarted == 1).all()
+    assert "tensor([])" not in out and td["next", K.EPISODE, "spl"][td["next", "done"]].numel() == int(done.sum())
+
+
+def test_readme_python_section_is_these_snippets_and_true():
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme.split("## Python", 1)[1].split("\n## ", 1)[0]
+    assert section.count("```python") == 2
+    assert "episode metrics sit in `(\"next\", \"episode\")`" in section  # the reward spec's step outputs
+    assert "Observations hold the policy inputs" in section and "each worker process draws its own episodes" in section
 
 
 def test_readme_ppo_snippet_trains_two_iterations(demo):
@@ -120,7 +134,8 @@ def test_transforms_stack_passes_check_env_specs_with_the_camera_on(demo):
     assert td["next", "step_count"][:, -1].flatten().tolist() == [3, 3]
     base = env.base_env
     assert set(base.observation_spec.keys()) == {K.PAST_POSITIONS, K.GOAL_VECTOR, K.GOAL_POSE, K.RGB, K.PIXELS,
-                                                 K.INSTRUCTION_TOKENS, K.EPISODE}
+                                                 K.INSTRUCTION_TOKENS}  # no metrics: they are reward-spec outputs
+    assert set(base.full_reward_spec[K.EPISODE].keys()) == {k[-1] for k in K.EPISODE_KEYS}
     assert K.GOAL_IMAGE not in td.keys() and K.PRIVILEGED not in td["next"].keys()  # point-goal: no goal views
 
 
@@ -142,58 +157,61 @@ def test_episode_metrics_at_done_match_the_evaluators_records(demo):
         assert sorted(got[key].flatten().tolist()) == pytest.approx(sorted(getattr(m, attr) for m in recs), abs=tol)
     assert sorted(got["steps"].flatten().tolist()) == sorted(m.steps for m in recs)
     assert int(got["success"].sum()) == sum(m.success for m in recs) > 0  # the expert succeeds
-    assert (ra[K.EPISODE, "steps"][:, 0] == 0).all()  # a reset zeroes them
+    assert K.EPISODE not in ra.keys() and (ra["next", K.EPISODE, "steps"][:, 0] == 1).all()  # from zero after a reset
 
 
 def test_to_device_leaves_nothing_behind(demo):
-    """The meta device as a stand-in for a second one: every tensor the env, its camera and its table hold moves
-    (TorchRL's specs cannot go to meta, so `to`'s state half is called; the gpu test runs `to("cuda")` whole)."""
+    """The meta device as a stand-in for a second one: every tensor reachable from the env's attributes (its
+    camera, table, Gaussians, the in-env expert, finished records) moves, found by walking the objects themselves,
+    not their `state_dict()` (TorchRL's specs cannot go to meta, so `to`'s state half is called; the gpu test
+    runs `to("cuda")` whole). The navmesh and its distance fields stay on the CPU by design."""
     env = wanderland_nav.make_env(batch_size=2, env={"expert_action": True, "finished_records": True}, **demo)
-    env.rollout(40, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))  # some finished records too
-    assert env._finished
+    env.rollout(40, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))  # some finished records, expert progress
+    assert env._finished and env.expert._progress is not None
     env.move_state(torch.device("meta"))
-    left = [name for name, t in _tensors(env) if t.device.type != "meta"]
+    found = dict(_tensors(env))
+    left = [name for name, t in found.items() if t.device.type != "meta"]
     assert not left, f"still on the CPU after to('meta'): {left}"
-    assert len(list(_tensors(env))) > 30
+    assert len(found) > 50 and "env.expert._progress" in found and any("gaussians" in n for n in found)
 
 
-def _tensors(env):
-    """(name, tensor) for every tensor reachable from the env's state (attributes, camera, table, Gaussians)."""
-    import dataclasses
+def _tensors(obj, name="env", seen=None):
+    """(name, tensor) for every tensor reachable from `obj` through attributes (`vars`, slots), dicts, lists and
+    tuples, into the project's, torch's and tensordict's objects; the specs and the CPU-side navmesh skipped."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen or name.rsplit(".", 1)[-1] in ("_input_spec", "_output_spec", "navmesh", "field", "step_field"):
+        return
+    seen.add(id(obj))
+    if isinstance(obj, torch.Tensor):
+        yield name, obj
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _tensors(v, f"{name}.{k}" if k in ("_buffers", "_parameters", "_modules") else f"{name}[{k!r}]",
+                                seen)
+    elif isinstance(obj, (list, tuple, set)):
+        for i, v in enumerate(obj):
+            yield from _tensors(v, f"{name}[{i}]", seen)
+    elif type(obj).__module__.split(".")[0] in ("wanderland_nav", "policies", "torch", "tensordict", "torchrl"):
+        attrs = vars(obj) if hasattr(obj, "__dict__") else {}
+        attrs = {**attrs, **{k: getattr(obj, k) for k in getattr(type(obj), "__slots__", ()) if hasattr(obj, k)}}
+        for k, v in attrs.items():
+            if k in ("_buffers", "_parameters", "_modules"):  # nn.Module: their entries as attributes
+                for kk, vv in v.items():
+                    yield from _tensors(vv, f"{name}.{kk}", seen)
+            else:
+                yield from _tensors(v, f"{name}.{k}", seen)
 
-    seen = set()
 
-    def walk(name, v):
-        if id(v) in seen:
-            return
-        seen.add(id(v))
-        if isinstance(v, torch.Tensor):
-            yield name, v
-        elif isinstance(v, dict):
-            for k, x in v.items():
-                yield from walk(f"{name}[{k!r}]", x)
-        elif isinstance(v, (list, tuple)):
-            for i, x in enumerate(v):
-                yield from walk(f"{name}[{i}]", x)
-        elif dataclasses.is_dataclass(v) and not isinstance(v, type):
-            for f in dataclasses.fields(v):
-                yield from walk(f"{name}.{f.name}", getattr(v, f.name))
-        elif isinstance(v, torch.nn.Module):
-            for k, x in v.state_dict(keep_vars=True).items():
-                yield from walk(f"{name}.{k}", x)
+def test_the_expert_on_a_policy_facing_env_says_what_to_build(demo):
+    from wanderland_nav.envs import ExpertPolicy
 
-    for attr in ("_pos", "_yaw", "_ep", "_serial", "_steps", "_rgb", "_pos_hist", "_dist", "_progress", "_path_len",
-                 "_collisions", "_nonfinite", "_undefined_steps", "_flags", "_outcome", "_agent_tokens", "table",
-                 "_goal_images", "_has_goal_image", "shortest_length", "_R_ns", "_finished", "expert"):
-        yield from walk(attr, getattr(env, attr))
-    cam = env.camera
-    for attr in ("K", "nav_from_scene", "background"):
-        yield from walk(f"camera.{attr}", getattr(cam, attr))
-    for i, t in enumerate(cam.gaussians._tensors()):
-        yield f"camera.gaussians[{i}]", t
-    for name, v in vars(env).items():  # anything else the env holds directly
-        if isinstance(v, torch.Tensor):
-            yield name, v
+    env = wanderland_nav.make_env(batch_size=2, **demo)
+    expert = ExpertPolicy(env)
+    with pytest.raises(KeyError, match=r"privileged.*env=\{'privileged': True\}.*expert_action"):
+        env.rollout(2, expert)
+    env = wanderland_nav.make_env(batch_size=2, env={"privileged": True, "camera": {"enabled": False}}, **demo)
+    td = env.rollout(60, ExpertPolicy(env), break_when_any_done=False)  # the privileged keys on request
+    assert td["next", K.EPISODE, "success"][td["next", "done"]].any()
 
 
 @pytest.mark.gpu
@@ -202,9 +220,13 @@ def test_cuda_env_steps_on_the_gpu(demo):
     td = env.rollout(3)
     assert td.device.type == "cuda" and td["next", K.RGB].is_cuda and env._pos.is_cuda
     assert env.camera.gaussians.means.is_cuda and env.table.goal_position.is_cuda
-    cpu = wanderland_nav.make_env(batch_size=2, **demo).to("cuda")
+    cpu = wanderland_nav.make_env(batch_size=2, env={"expert_action": True}, **demo)
+    cpu.rollout(2, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))  # the expert's progress exists, on the CPU
+    cpu = cpu.to("cuda")
     assert cpu._pos.is_cuda and cpu.camera.K.is_cuda and cpu.camera.gaussians.means.is_cuda
-    assert cpu.rollout(3)["next", K.PIXELS].is_cuda
+    assert cpu.expert._progress.is_cuda and cpu.expert.paths.is_cuda
+    td = cpu.rollout(3, lambda td: td.set(K.ACTION, td[K.EXPERT_ACTION]))
+    assert td["next", K.PIXELS].is_cuda and td["next", K.EPISODE, "spl"].is_cuda
 
 
 def test_pixels_give_video_recorder_one_frame_per_step(demo, tmp_path):
@@ -300,4 +322,6 @@ def test_readme_quick_start_verbatim(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     scope = {}
     exec(textwrap.dedent(QUICK_START), scope)
-    assert scope["td"].batch_size == (4, 20) and (tmp_path / "data" / "scenes").is_dir()
+    td = scope["td"]
+    assert td.batch_size == (4, 200) and (tmp_path / "data" / "scenes" / "demo_tiny").is_dir()
+    assert td["next", "episode", "spl"][td["next", "done"]].numel() > 0  # the SPL print is not empty

@@ -18,7 +18,9 @@ Keyword overrides are spelled as on the command line, one per config key: `batch
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
+import multiprocessing
 
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians, shaped_env_config
 from wanderland_nav.compose.cli import compose_config
@@ -64,24 +66,47 @@ def make_env(scene: str = "demo", *, policy=None, **overrides):
     for a scene set (`scene="demo_set"`, or any `scene.set` block) a `MultiSceneNavEnv` whose `batch_size`
     agents are spread over the set's scenes (`scene.set.num_active` at a time), as `train` steps a set.
 
-    policy: a library policy (`policies.make_policy`); the camera, history and waypoint action are shaped
-        to it (`compose.shaped_env_config`), as `train` does.
-    overrides: keys of `conf/make_env.yaml` (see the module docstring).
+    Args:
+        scene: "demo" (the procedural block, built under `data/scenes/` on first use), "demo_set", or a scene
+            folder.
+        policy: a library policy (`policies.make_policy`); the camera size, history and waypoint action are
+            shaped to it (`compose.shaped_env_config`), as `train` does. Without one the camera is the main
+            job's: 32 x 32 px (its CityWalker-style policy's input) at the 2-px level of detail.
+        overrides: keys of `conf/make_env.yaml`, spelled as on the command line (see the module docstring):
+
+            - `batch_size` (1): agents stepped together.
+            - `device` ("cpu"): where the state, observations and camera live (the navmesh stays on the CPU).
+            - `seed` (None): the episode sampler's seed. None: 0 in the main process and a distinct seed in
+              every worker process (`process_seed`), so `ParallelEnv` / `MultiSyncCollector` workers built from
+              one `make_env` walk different episodes; an explicit seed is used as given in every process
+              (then seed the workers apart with `env.set_seed` / `collector.set_seed`).
+            - `demo_preset` ("tiny"): the demo's size ("default": 500k Gaussians).
+            - `episodes`: `path` (an episodes.json instead of the scene's own), `num` (60) / `seed` (0) /
+              `goal_images` (False) for the episodes generated when the scene has none.
+            - `render`: `lod_px` (2.0: the level of detail, pixels; None: every Gaussian), `image_size` (None:
+              the policy's input size; with a policy only), `backend` ("torch" | "compiled" | "gsplat").
+            - `env`: any `NavEnvConfig` field (`env={"camera": {"width": 64}}`, `env={"expert_action": True}`,
+              `env={"privileged": True}`, `env={"termination": {"max_steps": 200}}`); the defaults make it
+              policy-facing: no `privileged/`, `("next", "episode", ...)` metrics, `pixels` for video.
+            - `scene`, `navigation`: the scene group's fields and the navmesh / collision settings
+              (`navigation={"navmesh": {"agent_radius": 0.3}}`, `navigation={"prepare": False}`).
+            - `debug` ("none" | "smoke"): the test sizes (`conf/debug_sizes/smoke_make_env.yaml`).
     """
     c = make_env_config(scene, **overrides)
+    seed = c.seed if c.seed is not None else process_seed()
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     if c.scene.set is not None:
-        return _scene_set_env(c, env_cfg)
+        return _scene_set_env(c, env_cfg, seed)
     loaded = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
     loaded, episodes_path = scene_episodes(loaded, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                            generator=_generator(c.episodes.goal_images))
     gaussians = scene_gaussians(loaded, c.render.lod_px, needed=env_cfg.camera.enabled)
-    return env_factory(loaded, episodes_path, env_cfg, split=None, batch_size=c.batch_size, seed=c.seed,
+    return env_factory(loaded, episodes_path, env_cfg, split=None, batch_size=c.batch_size, seed=seed,
                        device=c.device, navmesh=load_navmesh(loaded), gaussians=gaussians)()
 
 
-def _scene_set_env(c: MakeEnvConfig, env_cfg):
+def _scene_set_env(c: MakeEnvConfig, env_cfg, seed: int):
     """The set's scenes prepared with `c.navigation` (episodes made where a scene has none), as one env."""
     if c.episodes.path is not None:
         raise ValueError(f"episodes.path={c.episodes.path}: a scene set uses each scene's own episodes.json; "
@@ -90,7 +115,18 @@ def _scene_set_env(c: MakeEnvConfig, env_cfg):
                             goal_images=c.episodes.goal_images)
     scene_env = scene_env_fn(paths, env_cfg, split=None, device=c.device, lod_px=c.render.lod_px)
     return multi_scene_env_fn(list(paths), scene_env, batch_size=c.batch_size, num_active=c.scene.set.num_active,
-                              device=c.device, memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)()
+                              device=c.device, memory_budget_gb=c.scene.set.memory_budget_gb, seed=seed)()
+
+
+def process_seed() -> int:
+    """`make_env`'s seed when none is given: 0 in the main process; in a child process (a `ParallelEnv` or
+    `MultiSyncCollector` worker, a Gymnasium `AsyncVectorEnv` worker) one derived from its place in the process
+    tree (`multiprocessing`'s identity, `(k,)` for the parent's k-th child), so every worker differs and the
+    same program gives the same seeds on every run."""
+    identity = multiprocessing.current_process()._identity
+    if not identity:
+        return 0
+    return int.from_bytes(hashlib.sha256(repr(tuple(identity)).encode()).digest()[:4], "little")
 
 
 def _generator(goal_images: bool):

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import logging
 import time
 from pathlib import Path
@@ -16,10 +19,14 @@ from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
 log = logging.getLogger(__name__)
 
 
-def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
+def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
+                 navigation: NavigationGroup | None = None) -> Path:
     """Where the scene lives; the demo is made there on first use (idempotent). A non-default demo
-    preset gets its own folder beside the default one (`<path>_<preset>`). A scene set is refused: the
-    commands that take one scene never quietly use a set's first scene."""
+    preset gets its own folder beside the default one (`<path>_<preset>`), and so do `navigation` settings
+    other than the default ones (`<path>_<preset>_nav<hash8>`): the demo's collision mesh, navmesh and episodes
+    are products of those settings, so `debug=smoke` (coarser voxels) and the main job each keep their own
+    beside the other instead of re-baking one folder in turn. A scene set is refused: the commands that take
+    one scene never quietly use a set's first scene."""
     if scene.set is not None:
         raise ValueError(f"scene={scene.name} is a scene set; this command takes one scene: pass scene=<folder> "
                          f"(one of the set's, e.g. scene={scene.path}). prepare, make_episodes, train and evaluate "
@@ -28,6 +35,7 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
     if scene.demo:
         preset = demo_preset or scene.preset
         path = path if preset == "default" else Path(f"{path}_{preset}")
+        path = Path(f"{path}{navigation_tag(navigation)}")
         t = time.perf_counter()
         make_demo_scene(path, seed=scene.seed, preset=preset)
         log.info("demo scene (%s) ready at %s (%.1fs)", preset, path, time.perf_counter() - t)
@@ -36,12 +44,24 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None) -> Path:
     return path
 
 
+def navigation_tag(navigation: NavigationGroup | None) -> str:
+    """"" for the default collision and navmesh settings (or none given), else `_nav<hash8>` of them."""
+    if navigation is None:
+        return ""
+    text = lambda n: json.dumps([dataclasses.asdict(n.collision), dataclasses.asdict(n.navmesh)],  # noqa: E731
+                                sort_keys=True)
+    mine = text(navigation)
+    if mine == text(NavigationGroup()):
+        return ""
+    return "_nav" + hashlib.sha256(mine.encode()).hexdigest()[:8]
+
+
 def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, demo_preset: str | None = None,
                    force: bool = False, bake_navmesh: bool = True, prepare: bool | None = None):
     """The loaded Scene with collision mesh and navmesh built from `navigation` (skipped when up to
     date); with `prepare` (default `navigation.prepare`) false, a non-demo scene's artefacts on disk
     are used as they are."""
-    path = scene_folder(scene, demo_preset)
+    path = scene_folder(scene, demo_preset, navigation)
     prepare = navigation.prepare if prepare is None else prepare
     if not (prepare or scene.demo or force):
         loaded = load_scene(path, up_axis=scene.up_axis)

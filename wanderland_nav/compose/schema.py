@@ -375,9 +375,16 @@ class MakeEnvEpisodes:
     goal_images: bool = False
 
 
+MAIN_JOB_CAMERA_PX = 32  # the main job's camera (`+exp=citywalker_rl`: the policy's 32 px input) ...
+MAIN_JOB_LOD_PX = 2.0  # ... at its 2-px level of detail (conf/exp/citywalker_rl.yaml)
+
+
 def policy_facing_env_config() -> NavEnvConfig:
-    """`make_env.yaml`'s `env`: observations without ground truth, episode metrics and video pixels."""
-    return NavEnvConfig(privileged=False, episode_metrics=True, finished_records=False, pixels=True)
+    """`make_env.yaml`'s `env`: observations without ground truth, episode metrics and video pixels, the main
+    job's camera size."""
+    c = NavEnvConfig(privileged=False, episode_metrics=True, finished_records=False, pixels=True)
+    c.camera = dataclasses.replace(c.camera, width=MAIN_JOB_CAMERA_PX, height=MAIN_JOB_CAMERA_PX)
+    return c
 
 
 @dataclass
@@ -389,10 +396,10 @@ class MakeEnvConfig:
     env: NavEnvConfig = field(default_factory=policy_facing_env_config)
     batch_size: int = 1
     device: str = "cpu"
-    seed: int = 0
+    seed: Optional[int] = None  # null: 0 in the main process, a distinct seed per worker process (make_env.process_seed)
     demo_preset: str = "tiny"
     episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
-    render: RenderSettings = field(default_factory=RenderSettings)
+    render: RenderSettings = field(default_factory=lambda: RenderSettings(lod_px=MAIN_JOB_LOD_PX))
 
 # ------------------------------------------------------------------------------ benchmark / serve_policy
 @dataclass

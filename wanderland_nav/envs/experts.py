@@ -115,7 +115,8 @@ class ExpertPolicy(TensorDictModuleBase):
         padded = torch.as_tensor(pad_paths(paths, "ExpertPolicy"))  # [E, P, 3] float64
         self.register_buffer("paths", padded.to(env.device, torch.float32), persistent=False)
         self.register_buffer("cum", arc_lengths(padded).to(env.device, torch.float32), persistent=False)  # [E, P]
-        self._progress: torch.Tensor | None = None  # [B] arc length reached along each agent's path
+        # [B] arc length reached along each agent's path: a buffer, so `to(device)` moves it with the paths
+        self.register_buffer("_progress", None, persistent=False)
         self.crowd = getattr(env, "crowd", None)  # pedestrians: the expert waits while one is in its way
 
     @staticmethod
@@ -189,6 +190,12 @@ class ExpertPolicy(TensorDictModuleBase):
 
     @torch.no_grad()
     def forward(self, td: TensorDictBase) -> TensorDictBase:
+        missing = [k for k in self.in_keys if td.get(k, None) is None]
+        if missing:
+            raise KeyError(f"ExpertPolicy reads the privileged ground truth {missing}, which this tensordict lacks: "
+                           "a policy-facing env (wanderland_nav.make_env) leaves it out. Build the env with "
+                           "env={'privileged': True} for these keys, or with env={'expert_action': True} and act on "
+                           "td['expert_action'], the expert's action computed inside the env")
         pos = td.get(keys.AGENT_POSITION).float()  # [B, 3] nav
         yaw = td.get(keys.AGENT_YAW).float().reshape(-1)  # [B]
         ep = td.get(keys.EPISODE_INDEX).reshape(-1).long()

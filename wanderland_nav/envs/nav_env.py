@@ -251,13 +251,6 @@ class NavEnv(EnvBase):
             obs.update({keys.EPISODE_INDEX: i64(1), keys.STEP_COUNT: i64(1), keys.AGENT_POSITION: f32(3),
                         keys.AGENT_YAW: f32(1), keys.DISTANCE_TO_GOAL: f32(1), keys.SUCCESS: flag(),
                         keys.INTERVENTION: flag(), keys.COLLISION: flag()})
-        if self.config.episode_metrics:
-            obs.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
-                              i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
-                        for key in keys.EPISODE_KEYS})
-            if self.crowd is not None:
-                obs.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
-                            for key in keys.EPISODE_SOCIAL_KEYS})
         self.observation_spec = Composite(obs, shape=B, device=dev)
         if k.action_mode == "waypoints":
             r = k.waypoint_range
@@ -269,7 +262,18 @@ class NavEnv(EnvBase):
         if self.expert is not None:
             self.observation_spec[keys.EXPERT_ACTION] = Unbounded(shape=self.action_spec.shape, dtype=torch.float32,
                                                                   device=dev)
-        self.reward_spec = Unbounded(shape=(*B, 1), dtype=torch.float32, device=dev)
+        # The episode metrics are step outputs beside the reward, no observation: in the reward spec they appear in
+        # ("next", "episode") only, never at a reset, and the env's step_mdp leaves them behind as it leaves the reward
+        # (in the done spec TorchRL would OR them into `done`; in the observation spec recipes feed them to policies)
+        rewards = {keys.REWARD: Unbounded(shape=(*B, 1), dtype=torch.float32, device=dev)}
+        if self.config.episode_metrics:
+            rewards.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
+                                  i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
+                            for key in keys.EPISODE_KEYS})
+            if self.crowd is not None:
+                rewards.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
+                                for key in keys.EPISODE_SOCIAL_KEYS})
+        self.reward_spec = Composite(rewards, shape=B, device=dev)
         self.done_spec = Composite(
             {keys.DONE: flag(), keys.TERMINATED: flag(), keys.TRUNCATED: flag()}, shape=B, device=dev
         )
@@ -369,6 +373,7 @@ class NavEnv(EnvBase):
                 keys.DONE: done.unsqueeze(-1),
                 keys.TERMINATED: terminated.unsqueeze(-1),
                 keys.TRUNCATED: truncated.unsqueeze(-1),
+                **(self._episode_metrics() if cfg.episode_metrics else {}),
             }
         )
         t4 = time.perf_counter()
@@ -565,8 +570,6 @@ class NavEnv(EnvBase):
         truth = self._privileged()
         if self.config.privileged:
             obs.update(truth)
-        if self.config.episode_metrics:
-            obs.update(self._episode_metrics())
         out = TensorDict(obs, batch_size=[B], device=self.device)
         if self.expert is not None:  # the label from the ground truth, which itself may stay out
             out.set(keys.EXPERT_ACTION, self.expert(TensorDict(truth, batch_size=[B])).get(keys.ACTION))

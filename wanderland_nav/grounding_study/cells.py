@@ -60,9 +60,16 @@ class StudyCells:
 
     # ------------------------------------------------------------------ where things are
     def source(self) -> Path:
-        s = self.c.source
-        return scene_folder(SceneGroup(name="source", path=s.path, demo=s.demo, seed=s.demo_seed,
-                                       preset=s.demo_preset)).resolve()
+        """The grounded scene's folder. The demo's is the one `train` prepares with the recipe's `navigation`
+        (`compose.scene.scene_folder`: a non-default one, e.g. `debug=smoke`'s voxels, has its own folder), so
+        the study's train cells never re-bake the main job's demo in place."""
+        if getattr(self, "_source", None) is None:
+            s = self.c.source
+            navigation = (typed_config(compose_config("train", list(self.c.study.train)), TrainConfig).navigation
+                          if s.demo else None)
+            self._source = scene_folder(SceneGroup(name="source", path=s.path, demo=s.demo, seed=s.demo_seed,
+                                                   preset=s.demo_preset), navigation=navigation).resolve()
+        return self._source
 
     def env_path(self, env: str) -> Path:
         return self.source() if env == GROUNDED else (self.out / "scenes" / f"{env}_s{self.c.study.degrade_seed}")
