@@ -37,12 +37,13 @@ import torch
 from .gaussians import Gaussians
 from .hierarchy import GaussianHierarchy, _camera_table
 from .overlay import CameraGaussians
+from .packed import _sym6
 
 log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("fused_kernel.cpp")
 FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off", "-fno-math-errno", "-fno-trapping-math", "-pthread")
-ABI_VERSION = 1
+ABI_VERSION = 2
 CAMERA_MODELS = {"pinhole": 0, "fisheye": 1}
 DEPTH_MODES = {"RGB": 0, "D": 1, "RGB+D": 1, "ED": 2, "RGB+ED": 2}
 
@@ -56,9 +57,8 @@ class _Args(ctypes.Structure):
     P, I64, I32, F = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int32, ctypes.c_float
     _fields_ = [
         ("N", I64), ("I", I64), ("K", I64), ("sh_degree", I32), ("use_cut", I32),
-        ("means", P), ("ms_node", I64), ("ms_coord", I64),
-        ("leaf_cov", P), ("node_cov", P), ("leaf_opac", P), ("node_opac", P), ("leaf_dc", P), ("leaf_rest", P),
-        ("node_sh", P), ("radius", P), ("child_ptr", P), ("child_ids", P), ("start", P), ("n_start", I64),
+        ("rec", P), ("leaf_rest", P), ("node_sh", P), ("child_ptr", P), ("child_ids", P), ("start", P),
+        ("n_start", I64),
         ("C", I64), ("table", P), ("viewmat", P), ("Ks", P), ("campos", P), ("bg", P),
         ("width", I32), ("height", I32), ("camera_model", I32), ("antialiased", I32),
         ("target_px", F), ("near_plane", F), ("far_plane", F), ("eps2d", F), ("radius_clip", F),
@@ -171,39 +171,44 @@ def _c(t: torch.Tensor, dtype=torch.float32) -> torch.Tensor:
     return t.detach().to(dtype).contiguous()
 
 
+def _records(means, radius, covars, opacities, dc) -> torch.Tensor:
+    """[n, 16] float32 node records (fused_kernel.cpp `WlArgs.rec`): centre, radius, the covariance's six
+    entries symmetrised as the reference does (`packed._sym6`), opacity, SH DC, 2 unused."""
+    n = means.shape[0]
+    return torch.cat([_c(means), _c(radius).view(n, 1), _c(_sym6(covars.detach().float())), _c(opacities).view(n, 1),
+                      _c(dc), means.new_zeros(n, 2, dtype=torch.float32)], 1).contiguous()
+
+
 def _scene_tables(gaussians: Gaussians | GaussianHierarchy) -> dict:
-    """The kernel's read-only view of a scene, built once per object and kept on it (the tensors it points at
-    are the hierarchy's own, made contiguous float32; only the leaf covariances are computed here)."""
+    """The kernel's read-only view of a scene, built once per object and kept on it: one 64-byte record per
+    node (leaves then merged nodes), the higher SH coefficients, and the tree."""
     g = gaussians.leaves if isinstance(gaussians, GaussianHierarchy) else gaussians
     version = tuple((id(x), x._version) for x in gaussians._tensors())  # parameters changed in place: rebuild
     hit = gaussians.__dict__.get("_fused_tables")
     if hit is not None and hit["version"] == version:
         return hit
-    if isinstance(gaussians, GaussianHierarchy):
-        h, n = gaussians, gaussians.nodes
-        means = h.node_means_t()  # [3, T]
-        t = dict(N=h.num_leaves, I=n.means.shape[0], K=n.sh.shape[1], use_cut=1, means=_c(means),
-                 node_cov=_c(n.covars), node_opac=_c(n.opacities), node_sh=_c(n.sh), radius=_c(n.radius),
-                 child_ptr=_c(n.child_ptr, torch.int64), child_ids=_c(n.child_ids, torch.int64),
-                 start=_c(h.start_nodes(), torch.int64))
-        t["ms_node"], t["ms_coord"] = 1, t["means"].shape[1]
-    else:
-        t = dict(N=len(g), I=0, K=g.sh_rest.shape[1] + 1, use_cut=0, means=_c(g.means), ms_node=3, ms_coord=1)
     with torch.no_grad():
-        t.update(leaf_cov=_c(g.covariances()), leaf_opac=_c(g.opacities), leaf_dc=_c(g.sh_dc),
-                 leaf_rest=_c(g.sh_rest))
-    t["version"] = version
+        leaf_radius = gaussians.nodes.radius[:len(g)] if isinstance(gaussians, GaussianHierarchy) else \
+            g.means.new_zeros(len(g))
+        rec = _records(g.means, leaf_radius, g.covariances(), g.opacities, g.sh_dc)
+        t = dict(N=len(g), I=0, K=g.sh_rest.shape[1] + 1, use_cut=0, leaf_rest=_c(g.sh_rest))
+        if isinstance(gaussians, GaussianHierarchy):
+            h, n = gaussians, gaussians.nodes
+            inner = _records(n.means, n.radius[len(g):], n.covars, n.opacities, n.sh[:, 0])
+            rec = torch.cat([rec, inner])
+            t.update(I=n.means.shape[0], use_cut=1, node_sh=_c(n.sh), child_ptr=_c(n.child_ptr, torch.int64),
+                     child_ids=_c(n.child_ids, torch.int64), start=_c(h.start_nodes(), torch.int64))
+    t.update(rec=rec, version=version)
     gaussians.__dict__["_fused_tables"] = t
     return t
 
 
 def _scene_args(t: dict, sh_degree: int) -> _Args:
     a = _Args()
-    for k in ("N", "I", "K", "use_cut", "ms_node", "ms_coord"):
+    for k in ("N", "I", "K", "use_cut"):
         setattr(a, k, int(t[k]))
     a.sh_degree = int(sh_degree)
-    for k in ("means", "leaf_cov", "node_cov", "leaf_opac", "node_opac", "leaf_dc", "leaf_rest", "node_sh",
-              "radius", "child_ptr", "child_ids", "start"):
+    for k in ("rec", "leaf_rest", "node_sh", "child_ptr", "child_ids", "start"):
         setattr(a, k, _ptr(t.get(k)))
     a.n_start = int(t["start"].numel()) if "start" in t else 0
     return a

@@ -37,16 +37,12 @@ struct WlArgs {
   // the scene: node ids 0..N-1 are leaves, N..N+I-1 merged nodes (I = 0 for plain Gaussians)
   int64_t N, I, K;  // K: SH coefficients per channel stored (leaf_rest holds K-1)
   int32_t sh_degree, use_cut;
-  const float* means;  // node centres, element (node, coord) at means[node * ms_node + coord * ms_coord]
-  int64_t ms_node, ms_coord;
-  const float* leaf_cov;   // [N, 9]
-  const float* node_cov;   // [I, 9]
-  const float* leaf_opac;  // [N] activated
-  const float* node_opac;  // [I]
-  const float* leaf_dc;    // [N, 3]
-  const float* leaf_rest;  // [N, K-1, 3]
-  const float* node_sh;    // [I, K, 3]
-  const float* radius;     // [N + I] bounding spheres (cut only)
+  // one 64-byte record per node (what the cut and the projection read, one cache line):
+  // centre x y z, bounding-sphere radius, covariance xx xy xz yy yz zz (off-diagonals symmetrised as
+  // packed._sym6), activated opacity, SH DC r g b, 2 unused
+  const float* rec;        // [N + I, 16]
+  const float* leaf_rest;  // [N, K-1, 3] higher SH coefficients of the leaves
+  const float* node_sh;    // [I, K, 3] SH coefficients of the merged nodes
   const int64_t* child_ptr;  // [I + 1]
   const int64_t* child_ids;  // [N + I - 1]
   const int64_t* start;      // [n_start] where each view's descent starts
@@ -98,10 +94,13 @@ void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out) {
   std::vector<int64_t> frontier(a.start, a.start + a.n_start), next;
   while (!frontier.empty()) {
     next.clear();
-    for (int64_t node : frontier) {
-      const float* m0 = a.means + node * a.ms_node;
-      const float m[3] = {m0[0], m0[a.ms_coord], m0[2 * a.ms_coord]};
-      const float r = a.radius[node];
+    const size_t F = frontier.size();
+    for (size_t f = 0; f < F; ++f) {
+      const int64_t node = frontier[f];
+      if (f + 8 < F) __builtin_prefetch(a.rec + frontier[f + 8] * 16);
+      const float* rec = a.rec + node * 16;
+      const float m[3] = {rec[0], rec[1], rec[2]};
+      const float r = rec[3];
       float p[3];
       for (int i = 0; i < 3; ++i) p[i] = c[3 * i] * m[0] + c[3 * i + 1] * m[1] + c[3 * i + 2] * m[2] + c[9 + i];
       const float x = p[0], y = p[1], z = p[2];
@@ -173,7 +172,7 @@ void sh_colour(int degree, float dx, float dy, float dz, Coef sh, float col[3]) 
 
 // The reference's packed EWA projection and screen-space culls (packed._project_pairs,
 // projection.screen_space) of one Gaussian in one camera; false when culled.
-bool project(const WlArgs& a, int64_t cam, const float m[3], const float* cov9, float opac, Splat& s) {
+bool project(const WlArgs& a, int64_t cam, const float m[3], const float* cov6, float opac, Splat& s) {
   const float* V = a.viewmat + cam * 16;
   const float* Kc = a.Ks + cam * 9;
   const float R[9] = {V[0], V[1], V[2], V[4], V[5], V[6], V[8], V[9], V[10]};
@@ -219,8 +218,7 @@ bool project(const WlArgs& a, int64_t cam, const float m[3], const float* cov9, 
       t1[k] = j[3] * R[k] + j[4] * R[3 + k] + j[5] * R[6 + k];
     }
   }
-  const float xx = cov9[0], yy = cov9[4], zz = cov9[8];
-  const float xy = 0.5f * (cov9[1] + cov9[3]), xz = 0.5f * (cov9[2] + cov9[6]), yz = 0.5f * (cov9[5] + cov9[7]);
+  const float xx = cov6[0], xy = cov6[1], xz = cov6[2], yy = cov6[3], yz = cov6[4], zz = cov6[5];
   const float s0[3] = {xx * t0[0] + xy * t0[1] + xz * t0[2], xy * t0[0] + yy * t0[1] + yz * t0[2],
                        xz * t0[0] + yz * t0[1] + zz * t0[2]};
   const float s1[3] = {xx * t1[0] + xy * t1[1] + xz * t1[2], xy * t1[0] + yy * t1[1] + yz * t1[2],
@@ -272,7 +270,7 @@ typedef int32_t v8i __attribute__((vector_size(32)));
 inline v8f splat8(float x) { return v8f{x, x, x, x, x, x, x, x}; }
 
 // exp(x) for x in [-30, 0.1] to ~2 ulp (Cephes' expf polynomial), lane-wise.
-inline v8f exp8(v8f x) {
+__attribute__((optimize("fp-contract=fast"))) inline v8f exp8(v8f x) {
   const v8f t = x * 1.44269504088896341f + 0.5f;
   v8i i = __builtin_convertvector(t, v8i);  // truncation; one down where that rounded a negative up
   i = i + (t < __builtin_convertvector(i, v8f));
@@ -300,10 +298,21 @@ static_assert(TS == 4, "the pixel grid is for 4x4 tiles");
 
 // Front to back over one tile's list (rasterize.forward_chunk, one entry at a time): T [2] transmittance in/out
 // (pixels 0-7, 8-15), acc [5][2] += w (r, g, b, depth, 1). The quadratic is the reference's, tile-local.
+inline bool any8(v8i m) {
+  uint64_t q[4];
+  std::memcpy(q, &m, 32);
+  return (q[0] | q[1] | q[2] | q[3]) != 0;
+}
+
+// (Here, and only here, a*b+c may become one fused multiply-add: the composite is held to the reference at
+// float rounding, ~1e-6, not bit for bit.)
+__attribute__((optimize("fp-contract=fast")))
 void composite_tile(const Splat* splats, const int* list, int n, float ccx, float ccy, float th, v8f* T,
                     v8f (*acc)[2]) {
   const v8f zero = splat8(0.0f), m30 = splat8(-30.0f), amax = splat8(ALPHA_MAX), thv = splat8(th),
             eps = splat8(T_EPS);
+  // exp(s) > th needs s > log(th); below log(th) - 1e-3 no lane of a half can pass the threshold
+  const v8f skip = splat8(std::log(th) - 1e-3f);
   for (int e = 0; e < n; ++e) {
     const Splat& g = splats[list[e]];
     const float mx = g.mx - ccx, my = g.my - ccy;
@@ -315,6 +324,10 @@ void composite_tile(const Splat* splats, const int* list, int n, float ccx, floa
     for (int h = 0; h < 2; ++h) {
       v8f s = (GV[h] * q4 + (GV[h] * GV[h]) * q1) + X;
       s = s + (GV[h] * GU) * q2;
+      if (!any8(s > skip)) {  // every pixel of this half below the 1/255 threshold: nothing changes
+        alive |= T[h] > zero;
+        continue;
+      }
       s = s < m30 ? m30 : s;
       v8f al = exp8(s);
       al = al < amax ? al : amax;
@@ -337,11 +350,25 @@ void composite_tile(const Splat* splats, const int* list, int n, float ccx, floa
   }
 }
 
+// Stable LSD radix sort of `keys` by their high 32 bits (8-bit digits; a digit all keys share is skipped).
+void radix_sort_high(std::vector<uint64_t>& keys, std::vector<uint64_t>& tmp) {
+  const size_t n = keys.size();
+  tmp.resize(n);
+  for (int shift = 32; shift < 64; shift += 8) {
+    size_t count[257] = {0};
+    for (uint64_t k : keys) ++count[((k >> shift) & 0xFF) + 1];
+    if (count[((keys.empty() ? 0 : keys[0] >> shift) & 0xFF) + 1] == n) continue;
+    for (int d = 0; d < 256; ++d) count[d + 1] += count[d];
+    for (uint64_t k : keys) tmp[count[(k >> shift) & 0xFF]++] = k;
+    keys.swap(tmp);
+  }
+}
+
 struct Scratch {
   std::vector<int64_t> nodes;
   std::vector<Splat> splats, sorted;
-  std::vector<uint64_t> keys;
-  std::vector<int> tile_of, entries, start, list, fill;
+  std::vector<uint64_t> keys, keys_tmp, entries;
+  std::vector<int> start, list, fill;
 };
 
 void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
@@ -360,16 +387,19 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   w.splats.clear();
   const float* cp = a.campos + cam * 3;
   Splat s;
-  for (int64_t node : w.nodes) {
-    const float* m0 = a.means + node * a.ms_node;
-    const float m[3] = {m0[0], m0[a.ms_coord], m0[2 * a.ms_coord]};
+  const size_t Q = w.nodes.size();
+  for (size_t q = 0; q < Q; ++q) {
+    const int64_t node = w.nodes[q];
+    if (q + 8 < Q) __builtin_prefetch(a.rec + w.nodes[q + 8] * 16);
+    const float* rec = a.rec + node * 16;
     const bool leaf = node < N;
-    const float* cov = leaf ? a.leaf_cov + node * 9 : a.node_cov + (node - N) * 9;
-    const float o = leaf ? a.leaf_opac[node] : a.node_opac[node - N];
-    if (!project(a, cam, m, cov, o, s)) continue;
+    if (!project(a, cam, rec, rec + 4, rec[10], s)) continue;
     if (a.want_rgb) {
-      if (leaf) {
-        const float* dc = a.leaf_dc + node * 3;
+      const float* m = rec;
+      if (a.sh_degree == 0) {
+        sh_colour(0, m[0] - cp[0], m[1] - cp[1], m[2] - cp[2], [&](int, int ch) { return rec[11 + ch]; }, s.col);
+      } else if (leaf) {
+        const float* dc = rec + 11;
         const float* rest = a.leaf_rest + node * (K - 1) * 3;
         sh_colour(a.sh_degree, m[0] - cp[0], m[1] - cp[1], m[2] - cp[2],
                   [&](int i, int ch) { return i == 0 ? dc[ch] : rest[(i - 1) * 3 + ch]; }, s.col);
@@ -383,7 +413,9 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   }
   for (int64_t e = 0; e < a.M; ++e) {  // extra rows: constant colour (its SH is the DC term alone)
     const int64_t row = cam * a.M + e;
-    if (!project(a, cam, a.ex_means + row * 3, a.ex_cov + row * 9, a.ex_opac[row], s)) continue;
+    const float* c9 = a.ex_cov + row * 9;
+    const float cov6[6] = {c9[0], 0.5f * (c9[1] + c9[3]), 0.5f * (c9[2] + c9[6]), c9[4], 0.5f * (c9[5] + c9[7]), c9[8]};
+    if (!project(a, cam, a.ex_means + row * 3, cov6, a.ex_opac[row], s)) continue;
     for (int ch = 0; ch < 3; ++ch) {
       const float coef = (a.ex_rgb[row * 3 + ch] - 0.5f) / SH_C0;
       s.col[ch] = std::max(SH_C0 * coef + 0.5f, 0.0f);
@@ -400,11 +432,10 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
     std::memcpy(&bits, &w.splats[i].depth, 4);
     w.keys[i] = (uint64_t(bits) << 32) | uint32_t(i);
   }
-  std::sort(w.keys.begin(), w.keys.end());
+  radix_sort_high(w.keys, w.keys_tmp);
   w.sorted.resize(V);
   for (int i = 0; i < V; ++i) w.sorted[i] = w.splats[uint32_t(w.keys[i])];
   // 4. tile lists: (tile, splat) entries in depth order, then a stable counting sort by tile
-  w.tile_of.clear();
   w.entries.clear();
   for (int i = 0; i < V; ++i) {
     const Splat& g = w.sorted[i];
@@ -417,17 +448,15 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
     const float limit = std::log(g.o * 255.0f) + 1e-3f;
     for (int ty = y0; ty < y1; ++ty)
       for (int tx = x0; tx < x1; ++tx)
-        if (touches(ox, oy, ha, hc, g.b, nb_c, nb_a, limit, tx - x0, ty - y0)) {
-          w.tile_of.push_back(ty * TW + tx);
-          w.entries.push_back(i);
-        }
+        if (touches(ox, oy, ha, hc, g.b, nb_c, nb_a, limit, tx - x0, ty - y0))
+          w.entries.push_back((uint64_t(ty * TW + tx) << 32) | uint32_t(i));
   }
   w.start.assign(NT + 1, 0);
-  for (int t : w.tile_of) ++w.start[t + 1];
+  for (uint64_t e : w.entries) ++w.start[(e >> 32) + 1];
   for (int t = 0; t < NT; ++t) w.start[t + 1] += w.start[t];
   w.list.resize(w.entries.size());
   w.fill.assign(w.start.begin(), w.start.end() - 1);
-  for (size_t e = 0; e < w.entries.size(); ++e) w.list[w.fill[w.tile_of[e]]++] = w.entries[e];
+  for (uint64_t e : w.entries) w.list[w.fill[e >> 32]++] = uint32_t(e);
   // 5. composite, tile by tile
   const float th = std::nextafter(ALPHA_MIN, 0.0f);
   const int64_t img = cam * (int64_t)Wd * Ht;
@@ -485,7 +514,7 @@ struct CutResult {
 
 extern "C" {
 
-int wl_abi_version() { return 1; }
+int wl_abi_version() { return 2; }
 
 // Render every camera of `a` into its outputs.
 void wl_render(const WlArgs* a) {
