@@ -77,7 +77,7 @@ struct WlArgs {
 namespace {
 
 struct Splat {
-  float mx, my, a, b, c, o, lo, depth;
+  float mx, my, a, b, c, limit, lo, depth;
   float col[3];
   int rx, ry;
 };
@@ -233,7 +233,12 @@ bool project(const WlArgs& a, int64_t cam, const float m[3], const float* cov6, 
   float op = opac;
   if (a.antialiased) op = op * std::sqrt(std::max(det_orig / det, 0.0f));
   if (!(op >= ALPHA_MIN)) return false;
-  const float extend = std::min(RADIUS_SIGMAS, std::sqrt(2.0f * std::log(std::max(op, ALPHA_MIN) / ALPHA_MIN)));
+  // one log: log(255 op) is the opacity-aware extent's log(op / (1/255)) (projection.screen_space) and the tile
+  // test's limit; it rounds differently from the reference's quotient in the last bit only, which can move a
+  // ceil'd radius by one pixel where every pixel it adds is below the 1/255 threshold anyway
+  const float lo = std::log(std::max(op, 1.17549435e-38f));
+  const float l255 = lo + 5.54126354515843f;
+  const float extend = std::min(RADIUS_SIGMAS, std::sqrt(2.0f * std::max(l255, 0.0f)));
   const float rx = std::ceil(extend * std::sqrt(std::max(c00, 0.0f)));
   const float ry = std::ceil(extend * std::sqrt(std::max(c11, 0.0f)));
   if (rx <= a.radius_clip && ry <= a.radius_clip) return false;
@@ -242,8 +247,8 @@ bool project(const WlArgs& a, int64_t cam, const float m[3], const float* cov6, 
   if (!((int)rx > 0 && (int)ry > 0)) return false;
   s.mx = u; s.my = v;
   s.a = c11 / det; s.b = -c01 / det; s.c = c00 / det;
-  s.o = op;
-  s.lo = std::log(std::max(op, 1.17549435e-38f));
+  s.limit = l255 + 1e-3f;  // binning._tile_test_rows: log(255 o) + 1e-3
+  s.lo = lo;
   s.depth = zr;
   s.rx = (int)rx; s.ry = (int)ry;
   return true;
@@ -436,7 +441,8 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   w.sorted.resize(V);
   for (int i = 0; i < V; ++i) w.sorted[i] = w.splats[uint32_t(w.keys[i])];
   // 4. tile lists: (tile, splat) entries in depth order, then a stable counting sort by tile
-  w.entries.clear();
+  w.entries.resize(std::max<size_t>(w.entries.capacity(), 1024));
+  size_t n_entries = 0;
   for (int i = 0; i < V; ++i) {
     const Splat& g = w.sorted[i];
     const int x0 = std::min(std::max((int)std::floor((g.mx - g.rx) / TS), 0), TW);
@@ -445,12 +451,16 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
     const int y1 = std::min(std::max((int)std::ceil((g.my + g.ry) / TS), 0), TH);
     const float ox = x0 * TS + 0.5f - g.mx, oy = y0 * TS + 0.5f - g.my;
     const float ha = 0.5f * g.a, hc = 0.5f * g.c, nb_c = -g.b / g.c, nb_a = -g.b / g.a;
-    const float limit = std::log(g.o * 255.0f) + 1e-3f;
+    const size_t box = size_t(std::max(x1 - x0, 0)) * size_t(std::max(y1 - y0, 0));
+    if (w.entries.size() < n_entries + box) w.entries.resize(2 * (n_entries + box));
+    uint64_t* out = w.entries.data();
     for (int ty = y0; ty < y1; ++ty)
-      for (int tx = x0; tx < x1; ++tx)
-        if (touches(ox, oy, ha, hc, g.b, nb_c, nb_a, limit, tx - x0, ty - y0))
-          w.entries.push_back((uint64_t(ty * TW + tx) << 32) | uint32_t(i));
+      for (int tx = x0; tx < x1; ++tx) {  // written always, kept when it touches: no branch to mispredict
+        out[n_entries] = (uint64_t(ty * TW + tx) << 32) | uint32_t(i);
+        n_entries += touches(ox, oy, ha, hc, g.b, nb_c, nb_a, g.limit, tx - x0, ty - y0);
+      }
   }
+  w.entries.resize(n_entries);
   w.start.assign(NT + 1, 0);
   for (uint64_t e : w.entries) ++w.start[(e >> 32) + 1];
   for (int t = 0; t < NT; ++t) w.start[t + 1] += w.start[t];
