@@ -84,14 +84,15 @@ struct Splat {
 
 // Per camera, the reference's cut (hierarchy.GaussianHierarchy.cut): a breadth-first descent from the start
 // nodes, level by level, keeping visible nodes that are leaves or project to at most target_px pixels.
-void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out) {
+void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out, std::vector<int64_t>& frontier,
+                std::vector<int64_t>& next) {
   out.clear();
   const int64_t C = a.C, N = a.N;
   float c[21];
   for (int k = 0; k < 21; ++k) c[k] = a.table[k * C + cam];
   const bool pinhole = a.camera_model == 0;
   const float near = a.near_plane, target = a.target_px;
-  std::vector<int64_t> frontier(a.start, a.start + a.n_start), next;
+  frontier.assign(a.start, a.start + a.n_start);
   while (!frontier.empty()) {
     next.clear();
     const size_t F = frontier.size();
@@ -130,9 +131,9 @@ void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out) {
   }
 }
 
-// SH colour along dir (not normalised) of coefficients sh(k, ch), gsplat's +0.5 and clamp at 0.
-template <class Coef>
-void sh_colour(int degree, float dx, float dy, float dz, Coef sh, float col[3]) {
+// SH colour along dir (not normalised) from the DC term dc [3] and the higher coefficients rest [(k-1), 3]
+// (channel innermost), gsplat's +0.5 and clamp at 0.
+inline void sh_colour(int degree, float dx, float dy, float dz, const float* dc, const float* rest, float col[3]) {
   const float n = std::max(std::sqrt(dx * dx + dy * dy + dz * dz), 1e-12f);
   const float x = dx / n, y = dy / n, z = dz / n;
   float basis[16];
@@ -163,11 +164,10 @@ void sh_colour(int degree, float dx, float dy, float dz, Coef sh, float col[3]) 
       k = 16;
     }
   }
-  for (int ch = 0; ch < 3; ++ch) {
-    float s = 0.0f;
-    for (int i = 0; i < k; ++i) s += basis[i] * sh(i, ch);
-    col[ch] = std::max(s + 0.5f, 0.0f);
-  }
+  float sum[3] = {basis[0] * dc[0], basis[0] * dc[1], basis[0] * dc[2]};
+  for (int i = 1; i < k; ++i)
+    for (int ch = 0; ch < 3; ++ch) sum[ch] += basis[i] * rest[(i - 1) * 3 + ch];
+  for (int ch = 0; ch < 3; ++ch) col[ch] = std::max(sum[ch] + 0.5f, 0.0f);
 }
 
 // The reference's packed EWA projection and screen-space culls (packed._project_pairs,
@@ -370,7 +370,7 @@ void radix_sort_high(std::vector<uint64_t>& keys, std::vector<uint64_t>& tmp) {
 }
 
 struct Scratch {
-  std::vector<int64_t> nodes;
+  std::vector<int64_t> nodes, frontier, next;
   std::vector<Splat> splats, sorted;
   std::vector<uint64_t> keys, keys_tmp, entries;
   std::vector<int> start, list, fill;
@@ -382,7 +382,7 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   const int64_t N = a.N, K = a.K;
   // 1. the cut (or every leaf)
   if (a.use_cut) {
-    cut_camera(a, cam, w.nodes);
+    cut_camera(a, cam, w.nodes, w.frontier, w.next);
   } else {
     w.nodes.resize(N);
     std::iota(w.nodes.begin(), w.nodes.end(), int64_t(0));
@@ -395,24 +395,20 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   const size_t Q = w.nodes.size();
   for (size_t q = 0; q < Q; ++q) {
     const int64_t node = w.nodes[q];
-    if (q + 8 < Q) __builtin_prefetch(a.rec + w.nodes[q + 8] * 16);
+    if (q + 8 < Q) {
+      const int64_t ahead = w.nodes[q + 8];
+      __builtin_prefetch(a.rec + ahead * 16);
+      if (a.sh_degree > 0 && a.want_rgb) {  // its higher SH coefficients: 9 to 45 floats, one to three lines
+        const float* rest = ahead < N ? a.leaf_rest + ahead * (K - 1) * 3 : a.node_sh + ((ahead - N) * K + 1) * 3;
+        for (int64_t line = 0; line < (K - 1) * 3; line += 16) __builtin_prefetch(rest + line);
+      }
+    }
     const float* rec = a.rec + node * 16;
     const bool leaf = node < N;
     if (!project(a, cam, rec, rec + 4, rec[10], s)) continue;
     if (a.want_rgb) {
-      const float* m = rec;
-      if (a.sh_degree == 0) {
-        sh_colour(0, m[0] - cp[0], m[1] - cp[1], m[2] - cp[2], [&](int, int ch) { return rec[11 + ch]; }, s.col);
-      } else if (leaf) {
-        const float* dc = rec + 11;
-        const float* rest = a.leaf_rest + node * (K - 1) * 3;
-        sh_colour(a.sh_degree, m[0] - cp[0], m[1] - cp[1], m[2] - cp[2],
-                  [&](int i, int ch) { return i == 0 ? dc[ch] : rest[(i - 1) * 3 + ch]; }, s.col);
-      } else {
-        const float* sh = a.node_sh + (node - N) * K * 3;
-        sh_colour(a.sh_degree, m[0] - cp[0], m[1] - cp[1], m[2] - cp[2],
-                  [&](int i, int ch) { return sh[i * 3 + ch]; }, s.col);
-      }
+      const float* rest = leaf ? a.leaf_rest + node * (K - 1) * 3 : a.node_sh + ((node - N) * K + 1) * 3;
+      sh_colour(a.sh_degree, rec[0] - cp[0], rec[1] - cp[1], rec[2] - cp[2], rec + 11, rest, s.col);
     }
     w.splats.push_back(s);
   }
@@ -535,7 +531,7 @@ void wl_render(const WlArgs* a) {
 void* wl_cut(const WlArgs* a) {
   auto* r = new CutResult;
   r->per_camera.resize(a->C);
-  for_cameras(a->C, a->threads, [&](int64_t c, Scratch&) { cut_camera(*a, c, r->per_camera[c]); });
+  for_cameras(a->C, a->threads, [&](int64_t c, Scratch& w) { cut_camera(*a, c, r->per_camera[c], w.frontier, w.next); });
   return r;
 }
 
