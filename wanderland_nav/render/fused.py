@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("fused_kernel.cpp")
 FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off", "-fno-math-errno", "-fno-trapping-math", "-pthread")
-ABI_VERSION = 2
+ABI_VERSION = 3
 CAMERA_MODELS = {"pinhole": 0, "fisheye": 1}
 DEPTH_MODES = {"RGB": 0, "D": 1, "RGB+D": 1, "ED": 2, "RGB+ED": 2}
 
@@ -57,8 +57,7 @@ class _Args(ctypes.Structure):
     P, I64, I32, F = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int32, ctypes.c_float
     _fields_ = [
         ("N", I64), ("I", I64), ("K", I64), ("sh_degree", I32), ("use_cut", I32),
-        ("rec", P), ("leaf_rest", P), ("node_sh", P), ("child_ptr", P), ("child_ids", P), ("start", P),
-        ("n_start", I64),
+        ("rec", P), ("leaf_rest", P), ("node_sh", P), ("child_ptr", P), ("start", P), ("n_start", I64),
         ("C", I64), ("table", P), ("viewmat", P), ("Ks", P), ("campos", P), ("bg", P),
         ("width", I32), ("height", I32), ("camera_model", I32), ("antialiased", I32),
         ("target_px", F), ("near_plane", F), ("far_plane", F), ("eps2d", F), ("radius_clip", F),
@@ -171,17 +170,20 @@ def _c(t: torch.Tensor, dtype=torch.float32) -> torch.Tensor:
     return t.detach().to(dtype).contiguous()
 
 
-def _records(means, radius, covars, opacities, dc) -> torch.Tensor:
+def _records(means, radius, covars, opacities, dc, first_id: int = 0) -> torch.Tensor:
     """[n, 16] float32 node records (fused_kernel.cpp `WlArgs.rec`): centre, radius, the covariance's six
-    entries symmetrised as the reference does (`packed._sym6`), opacity, SH DC, 2 unused."""
+    entries symmetrised as the reference does (`packed._sym6`), opacity, SH DC, the node id (ids first_id..,
+    as int32 bits), 1 unused."""
     n = means.shape[0]
+    ids = torch.arange(first_id, first_id + n, dtype=torch.int32).view(torch.float32).view(n, 1)
     return torch.cat([_c(means), _c(radius).view(n, 1), _c(_sym6(covars.detach().float())), _c(opacities).view(n, 1),
-                      _c(dc), means.new_zeros(n, 2, dtype=torch.float32)], 1).contiguous()
+                      _c(dc), ids, means.new_zeros(n, 1, dtype=torch.float32)], 1).contiguous()
 
 
 def _scene_tables(gaussians: Gaussians | GaussianHierarchy) -> dict:
     """The kernel's read-only view of a scene, built once per object and kept on it: one 64-byte record per
-    node (leaves then merged nodes), the higher SH coefficients, and the tree."""
+    node, the higher SH coefficients, and the tree. A hierarchy's records are stored in the order of its child
+    lists, root last (`WlArgs.rec`): siblings side by side, so a descent reads memory in runs."""
     g = gaussians.leaves if isinstance(gaussians, GaussianHierarchy) else gaussians
     version = tuple((id(x), x._version) for x in gaussians._tensors())  # parameters changed in place: rebuild
     hit = gaussians.__dict__.get("_fused_tables")
@@ -194,10 +196,13 @@ def _scene_tables(gaussians: Gaussians | GaussianHierarchy) -> dict:
         t = dict(N=len(g), I=0, K=g.sh_rest.shape[1] + 1, use_cut=0, leaf_rest=_c(g.sh_rest))
         if isinstance(gaussians, GaussianHierarchy):
             h, n = gaussians, gaussians.nodes
-            inner = _records(n.means, n.radius[len(g):], n.covars, n.opacities, n.sh[:, 0])
-            rec = torch.cat([rec, inner])
+            inner = _records(n.means, n.radius[len(g):], n.covars, n.opacities, n.sh[:, 0], first_id=len(g))
+            order = torch.cat([n.child_ids.long(), torch.tensor([h.root])])  # slot -> node id
+            slot = torch.empty_like(order)
+            slot[order] = torch.arange(order.numel())
+            rec = torch.cat([rec, inner]).index_select(0, order).contiguous()
             t.update(I=n.means.shape[0], use_cut=1, node_sh=_c(n.sh), child_ptr=_c(n.child_ptr, torch.int64),
-                     child_ids=_c(n.child_ids, torch.int64), start=_c(h.start_nodes(), torch.int64))
+                     start=_c(slot.index_select(0, h.start_nodes().long()), torch.int64))
     t.update(rec=rec, version=version)
     gaussians.__dict__["_fused_tables"] = t
     return t
@@ -208,7 +213,7 @@ def _scene_args(t: dict, sh_degree: int) -> _Args:
     for k in ("N", "I", "K", "use_cut"):
         setattr(a, k, int(t[k]))
     a.sh_degree = int(sh_degree)
-    for k in ("rec", "leaf_rest", "node_sh", "child_ptr", "child_ids", "start"):
+    for k in ("rec", "leaf_rest", "node_sh", "child_ptr", "start"):
         setattr(a, k, _ptr(t.get(k)))
     a.n_start = int(t["start"].numel()) if "start" in t else 0
     return a

@@ -37,15 +37,16 @@ struct WlArgs {
   // the scene: node ids 0..N-1 are leaves, N..N+I-1 merged nodes (I = 0 for plain Gaussians)
   int64_t N, I, K;  // K: SH coefficients per channel stored (leaf_rest holds K-1)
   int32_t sh_degree, use_cut;
-  // one 64-byte record per node (what the cut and the projection read, one cache line):
-  // centre x y z, bounding-sphere radius, covariance xx xy xz yy yz zz (off-diagonals symmetrised as
-  // packed._sym6), activated opacity, SH DC r g b, 2 unused
+  // one 64-byte record per node (what the cut and the projection read, one cache line): centre x y z,
+  // bounding-sphere radius, covariance xx xy xz yy yz zz (off-diagonals symmetrised as packed._sym6),
+  // activated opacity, SH DC r g b, the node's id (int32 bits), 1 unused. Records are stored by slot: a
+  // hierarchy's in the order of its child lists (the root last), so that the children of interior node id j
+  // are the slots child_ptr[j - N] .. child_ptr[j - N + 1] - 1, side by side; plain Gaussians' slot = id.
   const float* rec;        // [N + I, 16]
   const float* leaf_rest;  // [N, K-1, 3] higher SH coefficients of the leaves
   const float* node_sh;    // [I, K, 3] SH coefficients of the merged nodes
   const int64_t* child_ptr;  // [I + 1]
-  const int64_t* child_ids;  // [N + I - 1]
-  const int64_t* start;      // [n_start] where each view's descent starts
+  const int64_t* start;      // [n_start] the slots where each view's descent starts
   int64_t n_start;
   // the cameras
   int64_t C;
@@ -76,6 +77,12 @@ struct WlArgs {
 
 namespace {
 
+inline int64_t node_id(const float* rec) {
+  int32_t id;
+  std::memcpy(&id, rec + 14, 4);
+  return id;
+}
+
 struct Splat {
   float mx, my, a, b, c, limit, lo, depth;
   float col[3];
@@ -83,7 +90,8 @@ struct Splat {
 };
 
 // Per camera, the reference's cut (hierarchy.GaussianHierarchy.cut): a breadth-first descent from the start
-// nodes, level by level, keeping visible nodes that are leaves or project to at most target_px pixels.
+// nodes, level by level, keeping visible nodes that are leaves or project to at most target_px pixels; out:
+// the kept slots, in the reference's order.
 void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out, std::vector<int64_t>& frontier,
                 std::vector<int64_t>& next) {
   out.clear();
@@ -119,13 +127,13 @@ void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out, std::ve
         close = dist - r <= near;
       }
       if (!visible) continue;
-      const bool expand = node >= N && (close || size > target);
+      const int64_t id = node_id(rec);
+      const bool expand = id >= N && (close || size > target);
       if (!expand) {
         out.push_back(node);
         continue;
       }
-      const int64_t j = node - N;
-      for (int64_t q = a.child_ptr[j]; q < a.child_ptr[j + 1]; ++q) next.push_back(a.child_ids[q]);
+      for (int64_t q = a.child_ptr[id - N]; q < a.child_ptr[id - N + 1]; ++q) next.push_back(q);
     }
     frontier.swap(next);
   }
@@ -396,18 +404,19 @@ void render_camera(const WlArgs& a, int64_t cam, Scratch& w) {
   for (size_t q = 0; q < Q; ++q) {
     const int64_t node = w.nodes[q];
     if (q + 8 < Q) {
-      const int64_t ahead = w.nodes[q + 8];
-      __builtin_prefetch(a.rec + ahead * 16);
-      if (a.sh_degree > 0 && a.want_rgb) {  // its higher SH coefficients: 9 to 45 floats, one to three lines
+      const float* ahead_rec = a.rec + w.nodes[q + 8] * 16;
+      __builtin_prefetch(ahead_rec);
+      if (a.sh_degree > 0 && a.want_rgb && q + 4 < Q) {  // the higher SH coefficients of a record read before
+        const int64_t ahead = node_id(a.rec + w.nodes[q + 4] * 16);
         const float* rest = ahead < N ? a.leaf_rest + ahead * (K - 1) * 3 : a.node_sh + ((ahead - N) * K + 1) * 3;
         for (int64_t line = 0; line < (K - 1) * 3; line += 16) __builtin_prefetch(rest + line);
       }
     }
     const float* rec = a.rec + node * 16;
-    const bool leaf = node < N;
     if (!project(a, cam, rec, rec + 4, rec[10], s)) continue;
     if (a.want_rgb) {
-      const float* rest = leaf ? a.leaf_rest + node * (K - 1) * 3 : a.node_sh + ((node - N) * K + 1) * 3;
+      const int64_t id = node_id(rec);
+      const float* rest = id < N ? a.leaf_rest + id * (K - 1) * 3 : a.node_sh + ((id - N) * K + 1) * 3;
       sh_colour(a.sh_degree, rec[0] - cp[0], rec[1] - cp[1], rec[2] - cp[2], rec + 11, rest, s.col);
     }
     w.splats.push_back(s);
@@ -520,7 +529,7 @@ struct CutResult {
 
 extern "C" {
 
-int wl_abi_version() { return 2; }
+int wl_abi_version() { return 3; }
 
 // Render every camera of `a` into its outputs.
 void wl_render(const WlArgs* a) {
@@ -531,7 +540,10 @@ void wl_render(const WlArgs* a) {
 void* wl_cut(const WlArgs* a) {
   auto* r = new CutResult;
   r->per_camera.resize(a->C);
-  for_cameras(a->C, a->threads, [&](int64_t c, Scratch& w) { cut_camera(*a, c, r->per_camera[c], w.frontier, w.next); });
+  for_cameras(a->C, a->threads, [&](int64_t c, Scratch& w) {
+    cut_camera(*a, c, r->per_camera[c], w.frontier, w.next);
+    for (int64_t& slot : r->per_camera[c]) slot = node_id(a->rec + slot * 16);  // slots -> node ids
+  });
   return r;
 }
 
