@@ -195,3 +195,40 @@ def test_two_processes_building_at_once_both_load(tmp_path):
     assert [p.wait(timeout=300) for p in procs] == [0, 0]
     built = list((tmp_path / "kernels").iterdir())
     assert len(built) == 1 and built[0].suffix == ".so"  # one library, no temporaries left behind
+
+
+def test_env_camera_renders_every_agent_in_one_fused_call(tiny_demo_scene, tiny_cut):
+    """`AgentCamera` with the default backend: one renderer call for all B cameras, the same uint8 frames as the
+    torch backend's groups (to one step of rounding), depth to 1e-4 m."""
+    from wanderland_nav.envs.camera import AgentCamera
+    from wanderland_nav.envs.config import CameraConfig
+    from wanderland_nav.scene import load_scene
+
+    h = tiny_cut[0]
+    scene = load_scene(tiny_demo_scene)
+    R = np.asarray(scene.nav_from_scene, dtype=np.float64)
+    R = R[:3, :3] if R.shape == (4, 4) else R
+    nav = h.leaves.means.double().numpy() @ R.T
+    lo, hi = np.quantile(nav, 0.2, axis=0), np.quantile(nav, 0.8, axis=0)
+    gen = np.random.default_rng(0)
+    B = 6
+    pos = torch.as_tensor(np.c_[gen.uniform(lo[:2], hi[:2], (B, 2)), np.full(B, np.quantile(nav[:, 2], 0.05))],
+                          dtype=torch.float32)
+    yaw = torch.as_tensor(gen.uniform(-np.pi, np.pi, B), dtype=torch.float32)
+    calls = []
+
+    def counting(*args, **kw):
+        calls.append((args[1].shape[0], kw.get("backend", "torch")))
+        return render(*args, **kw)
+
+    frames = {}
+    for backend in ("fused", "torch"):
+        cfg = CameraConfig(width=32, height=32, depth=True, render_backend=backend, render_chunk=2, render_threads=2)
+        cam = AgentCamera(cfg, scene.nav_from_scene, counting, h, "cpu")
+        assert cam.backend() == backend
+        frames[backend] = cam.render(pos, yaw)
+    assert calls[0] == (B, "fused") and all(c == (2, "torch") for c in calls[1:]) and len(calls) == 1 + B // 2
+    (rgb_f, depth_f), (rgb_t, depth_t) = frames["fused"], frames["torch"]
+    assert float(rgb_t.float().std()) > 5  # the cameras see the scene
+    assert int((rgb_f.int() - rgb_t.int()).abs().max()) <= 1
+    torch.testing.assert_close(depth_f, depth_t, atol=1e-4, rtol=1e-4)
