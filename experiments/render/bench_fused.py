@@ -8,7 +8,7 @@ bare splat gets orbit views, as `bench_lod.py`) with `render.backend=torch` (tod
 and `render.backend=fused`, one after the other, and prints one line:
 
     scene res lod_px drawn | torch: 1 view/call, 8 views/call | fused: 1 view/call, 8 views/call |
-    speed-up (fused 8/call over torch 1/call and over torch 8/call) | cut: torch, fused | PSNR fused vs torch
+    speed-up at 1 view/call, at 8 views/call | cut: torch, fused | PSNR fused vs torch
 
 Times are CPU milliseconds per view of this process (`time.process_time`), best of `--repeat`, at one
 intra-op thread and one fused thread (the env's `--render-threads 1` operating point): on a shared machine
@@ -80,7 +80,7 @@ def main() -> None:
                 if line.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").is_file() else "?"
     print(f"commit {commit()}, {cpu}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, "
           f"1 intra-op thread, fused threads 1, best of {a.repeat}, CPU ms per view", flush=True)
-    cols = ["scene", "res", "lod_px", "drawn", "torch_1", "torch_8", "fused_1", "fused_8", "x_vs_1", "x_vs_8",
+    cols = ["scene", "res", "lod_px", "drawn", "torch_1", "torch_8", "fused_1", "fused_8", "x_1", "x_8",
             "cut_torch", "cut_fused", "psnr_db"]
     print("  ".join(f"{c:>9}" for c in cols), flush=True)
     for name in a.scenes:
@@ -110,7 +110,7 @@ def main() -> None:
                 drawn = fused.render_fused(h, vm, K, W, H, render_mode="RGB", threads=1, counts=True)[3]["drawn"]
                 ms = lambda s: 1e3 * s / V  # noqa: E731
                 row = [name, res, target, f"{drawn.double().mean():.0f}", f"{ms(t1):.2f}", f"{ms(t8):.2f}",
-                       f"{ms(f1):.2f}", f"{ms(f8):.2f}", f"{t1 / f8:.1f}", f"{t8 / f8:.1f}", f"{ms(ct):.2f}",
+                       f"{ms(f1):.2f}", f"{ms(f8):.2f}", f"{t1 / f1:.1f}", f"{t8 / f8:.1f}", f"{ms(ct):.2f}",
                        f"{ms(cf):.3f}", f"{quality:.1f}"]
                 print("  ".join(f"{c!s:>9}" for c in row), flush=True)
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
