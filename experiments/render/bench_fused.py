@@ -31,7 +31,8 @@ from pathlib import Path
 import torch
 
 from experiments.render.bench_lod import capture_views, psnr
-from wanderland_nav.render import fused, render
+from wanderland_nav.render import Gaussians, fused, render
+from wanderland_nav.render.hierarchy import build_hierarchy
 from wanderland_nav.render.lod import load_splat
 
 LOD = {"tiny": (2.0, 1.0), "default": (2.0, 1.0), "guitar": (1.0,), "playbot": (1.0,)}
@@ -89,7 +90,8 @@ def main() -> None:
             print(f"{name}: {src} not found, skipped", flush=True)
             continue
         splat, viewmats, Ks1, aspect = capture_views(src, a.views)
-        h1 = load_splat(splat, LOD[name][0])
+        # a bare splat's hierarchy is built in memory: nothing is written beside data the project did not make
+        h1 = load_splat(splat, LOD[name][0]) if name in ("tiny", "default") else build_hierarchy(Gaussians.load(splat))
         vm = torch.as_tensor(viewmats, dtype=torch.float32)
         V = len(vm)
         for target in LOD[name]:

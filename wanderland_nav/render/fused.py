@@ -9,8 +9,8 @@ test of `binning.py`, the front-to-back composite of `rasterize.py`, the backgro
 stays the differentiable reference (`render.backend=torch`), and the tests hold this one to it.
 
 Build: at first use `g++` (or `$CXX`) compiles the source into `$WANDERLAND_CACHE/kernels/` (default
-`~/.cache/wanderland_nav`) under a name keyed by the source, the flags and the compiler, so it is built once
-per machine; two processes building at once each write a temporary file and rename it into place. The
+`~/.cache/wanderland_nav`) under a name keyed by the source, the flags, the compiler and the CPU kind, so it is
+built once per machine; two processes building at once each write a temporary file and rename it into place. The
 library is loaded with ctypes (no torch headers, about a second to build). Where it cannot be built or
 loaded, `available()` is False and `render(..., backend="fused")` runs the torch path, with one warning.
 
@@ -175,6 +175,8 @@ def _records(means, radius, covars, opacities, dc, first_id: int = 0) -> torch.T
     entries symmetrised as the reference does (`packed._sym6`), opacity, SH DC, the node id (ids first_id..,
     as int32 bits), 1 unused."""
     n = means.shape[0]
+    if first_id + n >= 2**31:
+        raise ValueError(f"render_fused: {first_id + n} nodes; the kernel's node ids are int32")
     ids = torch.arange(first_id, first_id + n, dtype=torch.int32).view(torch.float32).view(n, 1)
     return torch.cat([_c(means), _c(radius).view(n, 1), _c(_sym6(covars.detach().float())), _c(opacities).view(n, 1),
                       _c(dc), ids, means.new_zeros(n, 1, dtype=torch.float32)], 1).contiguous()
