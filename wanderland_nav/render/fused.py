@@ -29,6 +29,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -49,6 +50,7 @@ DEPTH_MODES = {"RGB": 0, "D": 1, "RGB+D": 1, "ED": 2, "RGB+ED": 2}
 
 _lib: ctypes.CDLL | None = None
 _failed: str | None = None
+_lock = threading.Lock()  # one build and one warning per process, whichever thread asks first
 
 
 class _Args(ctypes.Structure):
@@ -139,12 +141,14 @@ def library() -> ctypes.CDLL | None:
     """The loaded kernel, built on first use; None (after one warning per process) where that fails."""
     global _lib, _failed
     if _lib is None and _failed is None:
-        try:
-            _lib = _load()
-        except Exception as err:  # noqa: BLE001  any build or load failure means: the torch path
-            _failed = f"{type(err).__name__}: {err}"
-            warnings.warn(f"render: the fused camera kernel is unavailable, using the torch renderer ({_failed})",
-                          RuntimeWarning, stacklevel=3)
+        with _lock:
+            if _lib is None and _failed is None:
+                try:
+                    _lib = _load()
+                except Exception as err:  # noqa: BLE001  any build or load failure means: the torch path
+                    _failed = f"{type(err).__name__}: {err}"
+                    warnings.warn(f"render: the fused camera kernel is unavailable, using the torch renderer "
+                                  f"({_failed})", RuntimeWarning, stacklevel=4)
     return _lib
 
 
