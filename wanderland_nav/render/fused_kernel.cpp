@@ -511,13 +511,16 @@ template <class Fn>
 void for_cameras(int64_t C, int threads, Fn fn) {
   const int n = (int)std::max<int64_t>(1, std::min<int64_t>(threads, C));
   std::atomic<int64_t> next{0};
-  auto work = [&]() {
-    Scratch w;
+  auto work = [&](Scratch& w) {
     for (int64_t c; (c = next.fetch_add(1)) < C;) fn(c, w);
   };
   std::vector<std::thread> pool;
-  for (int i = 1; i < n; ++i) pool.emplace_back(work);
-  work();
+  for (int i = 1; i < n; ++i) pool.emplace_back([&]() {
+    Scratch w;
+    work(w);
+  });
+  static thread_local Scratch caller;  // the calling thread's buffers outlive the call: no reallocation per step
+  work(caller);
   for (auto& t : pool) t.join();
 }
 
