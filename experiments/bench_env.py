@@ -3,11 +3,14 @@
     python experiments/bench_env.py [--preset tiny|default] [--batch 1 16 64] [--res 64 128] [--steps 3]
                                     [--device cpu|cuda] [--threads 2] [--lod-px 1] [--no-off]
                                     [--compete 0] [--repeats 1] [--render-threads N] [--policy citywalker]
+                                    [--backend fused torch]
 
 `--res` with no value runs the camera-off rows only; `--no-off` skips them. `--compete N` starts N
 CPU-bound busy-loop processes for the duration (the "other jobs on the machine" case); they are ended
 at exit. `--repeats R` times each row R times and prints the best and the median.
-`--render-threads N` sets `camera.render_threads` (default: the CPU cores).
+`--render-threads N` sets `camera.render_threads` (default: the CPU cores). `--backend` names one or more
+`camera.render_backend`s (default: the camera's own, "fused"); each (resolution, B) row runs once per backend,
+back to back, so old and new are measured in the same machine state.
 `--policy NAME` (conf/policy/NAME.yaml) also times that policy on the env's observations each step:
 a no-grad forward at B (collection; `pol ms` column) and a forward + backward on a minibatch of
 `--minibatch` rows (a PPO update's unit; `upd ms`), both excluded from the env's frames/s.
@@ -83,7 +86,7 @@ def time_policy(policy, td, minibatch: int) -> tuple[float, float]:
 
 
 def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: str, enabled: bool = True,
-              render_threads: int | None = None, policy=None, minibatch: int = 200):
+              render_threads: int | None = None, policy=None, minibatch: int = 200, backend: str | None = None):
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes import load_episodes
@@ -93,6 +96,8 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     cfg.camera.enabled = enabled
     if render_threads is not None:
         cfg.camera.render_threads = render_threads
+    if backend is not None:
+        cfg.camera.render_backend = backend
     if hasattr(cfg, "goal_image"):
         cfg.goal_image = "none"  # goal views are not the step's cost (and need files loaded by the caller)
     env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=B, device=device,
@@ -118,7 +123,7 @@ def bench_one(scene, navmesh, gaussians, B: int, res: int, steps: int, device: s
     render = tm["render"] + tm["reset_render"]
     share = lambda x: 100.0 * x / env_time  # noqa: E731
     return {
-        "B": B, "res": res if enabled else "off", "fps": B * steps / env_time, "fps/cpu-s": B * steps / cpu_time,
+        "B": B, "res": res if enabled else "off", "backend": env.camera.backend() if enabled else "-", "fps": B * steps / env_time, "fps/cpu-s": B * steps / cpu_time,
         "ms/step": 1e3 * env_time / steps,
         "render%": share(render), "motion%": share(tm["physics"]), "rules%": share(tm["rules"]),
         "obs%": share(tm["observation"]), "torchrl%": share(env_time - tm["step"] - tm["reset_render"]),
@@ -144,6 +149,7 @@ def main():
     ap.add_argument("--render-threads", type=int, default=None, help="camera.render_threads (default: the cores)")
     ap.add_argument("--policy", default=None, help="also time this policy (conf/policy/NAME.yaml) per step")
     ap.add_argument("--minibatch", type=int, default=200, help="rows of the policy's timed forward + backward")
+    ap.add_argument("--backend", nargs="+", default=[None], help="camera.render_backend(s), each timed in turn")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     scene, navmesh, gaussians = prepare(args.preset, args.root, args.episodes, args.lod_px)
@@ -156,7 +162,7 @@ def main():
               f"({render_threads} render threads), "
               f"{args.steps} timed steps after 1 warm-up, {args.compete} competing busy loops, "
               f"load average {os.getloadavg()[0]:.2f}")
-        cols = ["B", "res", "fps", "fps_med", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
+        cols = ["B", "res", "backend", "fps", "fps_med", "fps/cpu-s", "ms/step", "render%", "motion%", "rules%", "obs%", "torchrl%"]
         policy = None
         if args.policy:
             policy = load_policy(args.policy)
@@ -164,13 +170,14 @@ def main():
         print("  ".join(f"{c:>9}" for c in cols), flush=True)
         for B in args.batch:
             for res in args.res + ([] if args.no_off else [None]):
-                runs = [bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device,
-                                  enabled=res is not None, render_threads=args.render_threads, policy=policy,
-                                  minibatch=args.minibatch) for _ in range(args.repeats)]
-                r = max(runs, key=lambda x: x["fps"])
-                r["fps_med"] = statistics.median(x["fps"] for x in runs)
-                print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols),
-                      flush=True)
+                for backend in args.backend if res is not None else [None]:
+                    runs = [bench_one(scene, navmesh, gaussians, B, res or 64, args.steps, args.device,
+                                      enabled=res is not None, render_threads=args.render_threads, policy=policy,
+                                      minibatch=args.minibatch, backend=backend) for _ in range(args.repeats)]
+                    r = max(runs, key=lambda x: x["fps"])
+                    r["fps_med"] = statistics.median(x["fps"] for x in runs)
+                    print("  ".join(f"{r[c]:>9.1f}" if isinstance(r[c], float) else f"{r[c]!s:>9}" for c in cols),
+                          flush=True)
     finally:
         for h in hogs:
             h.kill()

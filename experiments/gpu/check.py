@@ -92,14 +92,18 @@ def env_fps(args) -> None:
 
     t0 = time.perf_counter()
     scene, navmesh, gaussians = scene_parts(args.device)
-    figs = {}
+    figs, backends = {}, set()
     for res in args.res:
         for B in args.batch:
             r = bench_one(scene, navmesh, gaussians, B, res, args.steps, args.device)
             figs[f"B{B}_{res}px"] = round(r["fps"], 1)
-            print(f"  B={B:5d} {res:4d} px  {r['fps']:9.1f} agent-frames/s  render {r['render%']:.0f} %", flush=True)
+            backends.add(r["backend"])
+            print(f"  B={B:5d} {res:4d} px  {r['fps']:9.1f} agent-frames/s  render {r['render%']:.0f} %  "
+                  f"camera backend {r['backend']}", flush=True)
+    # render.backend=fused (the default) is a CPU kernel: a CUDA splat renders on the torch path instead
     write(args.out, "env_fps", "ok", time.perf_counter() - t0, figs,
-          f"agent-frames/s, expert-driven, {args.steps} timed steps after a warm-up, device {args.device}")
+          f"agent-frames/s, expert-driven, {args.steps} timed steps after a warm-up, device {args.device}, camera "
+          f"backend {'/'.join(sorted(backends))} (the fused camera is CPU-only; CUDA renders with torch)")
 
 
 def summary(args) -> int:

@@ -191,7 +191,7 @@ class RenderSettings:
     # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
     lod_px: Optional[float] = DEFAULT_LOD_PX
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
-    backend: str = "torch"  # torch (packed eager) | compiled (torch.compile'd stages) | gsplat (CUDA extra)
+    backend: str = "fused"  # fused (render/fused.py, CPU) | torch (the reference) | compiled | gsplat (CUDA extra)
 
 
 @dataclass

@@ -21,12 +21,15 @@ import torch
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
 from planners.threads import intra_op_threads
+from wanderland_nav.render import fused
 from wanderland_nav.render.shards import map_single_threaded
 
 Renderer = Callable[..., object]
 """`render(gaussians, cam_from_world[C,4,4], K[C,3,3], width, height, *, render_mode, background,
-camera_model[, backend]) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or None` (render.render);
-`backend` is passed only when `CameraConfig.render_backend` is not the default "torch"."""
+camera_model[, backend, threads]) -> obj with .rgb [C,H,W,3] float in [0,1], .depth [C,H,W,1] or None`
+(render.render); `backend` is passed only when the camera's backend is not "torch", `threads` with "fused".
+The "fused" backend (the default) is used where `render.fused.supports` the splat (CPU float32 Gaussians or a
+hierarchy); anything else (another renderer's own scene object, a CUDA splat) gets the "torch" protocol."""
 
 
 def camera_intrinsics(cfg: CameraConfig) -> torch.Tensor:
@@ -96,8 +99,9 @@ class AgentCamera:
         extra: per-camera Gaussians `[B, M]` (`render.overlay.CameraGaussians`: the pedestrians each camera's
         env instance holds), composited into the same renderer calls; None renders the scene alone.
 
-        The B cameras are rendered in groups of `group_size(B, render_chunk)` (one batched renderer
-        call each, which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
+        The fused backend renders all B cameras in one call, `workers()` cameras at a time (its memory is per
+        camera). The others render groups of `group_size(B, render_chunk)` (one batched renderer call each,
+        which bounds peak memory); the groups never depend on the thread count. On CPU with the eager
         backend, `workers()` threads render them concurrently on one intra-op thread each
         (`render.shards`): same images for any thread count."""
         if rows is not None and not bool(rows.all()):
@@ -118,10 +122,13 @@ class AgentCamera:
                 depth.zero_()
             return rgb, depth
         viewmats = self.cam_from_world(position_nav, yaw)
+        if self.backend() == "fused":
+            self._render_group(viewmats, rgb, depth, 0, B, extra=extra)
+            return rgb, depth
         size = group_size(B, self.cfg.render_chunk)
         groups = [(s, min(B, s + size)) for s in range(0, B, size)]
         render_group = lambda g: self._render_group(viewmats, rgb, depth, *g, extra=extra)  # noqa: E731
-        if self.device.type == "cpu" and self.cfg.render_backend == "torch":
+        if self.device.type == "cpu" and self.backend() == "torch":
             map_single_threaded(render_group, groups, self.workers())
         else:  # GPU and compiled kernels schedule their own threads (on CPU: the env caller's intra-op threads)
             with intra_op_threads(self.caller_threads or torch.get_num_threads()):
@@ -129,12 +136,23 @@ class AgentCamera:
                     render_group(g)
         return rgb, depth
 
+    def backend(self) -> str:
+        """The backend the camera renders with: `render_backend`, except "fused" where the kernel does not take
+        the splat (`render.fused.supports`) or cannot be built (one warning), which renders on the "torch" path."""
+        b = self.cfg.render_backend
+        if b == "fused" and not (fused.supports(self.gaussians, self.cfg.camera_model) and fused.available()):
+            return "torch"
+        return b
+
     def _render_group(self, viewmats: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor | None, s: int, e: int,
                       extra=None):
         """Render cameras `s:e` of `viewmats [B, 4, 4]` into rows `s:e` of `rgb` / `depth` (disjoint per group)."""
         H, W = self.cfg.height, self.cfg.width
         people = extra
-        extra = {} if self.cfg.render_backend == "torch" else {"backend": self.cfg.render_backend}
+        backend = self.backend()
+        extra = {} if backend == "torch" else {"backend": backend}
+        if backend == "fused":
+            extra["threads"] = self.workers()
         if people is not None:
             extra["extra"] = people.rows(s, e)
         out = self.renderer(

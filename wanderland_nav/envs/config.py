@@ -18,7 +18,7 @@ ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")
 EPISODE_ORDERS = ("sample", "iterate")
 GOAL_IMAGE_MODES = ("auto", "render", "none")
-RENDER_BACKENDS = ("torch", "compiled", "gsplat")
+RENDER_BACKENDS = ("fused", "torch", "compiled", "gsplat")
 
 
 @dataclass
@@ -37,7 +37,7 @@ class CameraConfig:
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] where nothing is hit
     render_chunk: int = 16  # cameras per render() call: bounds peak memory; the groups are rendered concurrently
     render_threads: int | None = None  # threads rendering groups (1 intra-op thread each); None: the CPU cores
-    render_backend: str = "torch"  # "torch" | "compiled" (torch.compile'd hot stages) | "gsplat" (CUDA, extra)
+    render_backend: str = "fused"  # "fused" (render/fused.py) | "torch" (the reference) | "compiled" | "gsplat" (CUDA)
 
 
 @dataclass

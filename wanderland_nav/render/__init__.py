@@ -5,7 +5,9 @@ swapped in; `render(gaussians, cam_from_world, K, width, height)` is the thin ca
 framework uses. Paths: `packed=True` (default) is the fast path for many cameras (`packed.py`),
 `packed=False` the eager dense reference (`projection.py`), `compiled=True` / `backend="compiled"`
 the torch.compile'd hot stages (`compiled.py`), `backend="gsplat"` gsplat's CUDA kernels
-(`gsplat_backend.py`, optional extra).
+(`gsplat_backend.py`, optional extra), `backend="fused"` the whole forward pass of every camera in one
+compiled CPU call with no gradients (`fused.py` over `fused_kernel.cpp`, built at first use; the env
+camera's default, tested equal to the torch path, which it falls back to where it cannot be built).
 """
 
 from .api import RenderOutput, rasterization, render

@@ -24,7 +24,7 @@ from .sh import spherical_harmonics
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
-BACKENDS = ("torch", "compiled", "gsplat")
+BACKENDS = ("torch", "fused", "compiled", "gsplat")
 
 
 def default_tile_size(device: torch.device) -> int:
@@ -328,14 +328,19 @@ def render(
     chunk_elems: int = DEFAULT_CHUNK_ELEMS,
     backend: str = "torch",
     extra: CameraGaussians | None = None,
+    threads: int | None = None,
 ) -> RenderOutput:
     """Render raw `Gaussians` (activated here) into C cameras. RGB is clamped to [0, 1].
 
     A `GaussianHierarchy` renders each camera's own cut at its `target_px` (`hierarchy.py`): the level of
     detail every simulator camera uses; plain `Gaussians` render all of them (the differentiable reference).
 
-    backend: "torch" (the packed eager fast path), "compiled" (its torch.compile'd hot stages) or
-    "gsplat" (gsplat's CUDA kernels, optional extra). All three take the same arguments.
+    backend: "torch" (the packed eager fast path, differentiable: the reference), "fused" (`fused.py`: the
+    whole forward pass of every camera in one compiled CPU call, no gradients; inputs it does not take, such
+    as CUDA tensors or Gaussians that need gradients, render on the torch path), "compiled" (torch.compile'd
+    hot stages) or "gsplat" (gsplat's CUDA kernels, optional extra). All take the same arguments.
+    threads: cameras the fused backend renders at once (None: torch's intra-op threads); the images do not
+    depend on it, and the other backends ignore it.
 
     extra: per-camera Gaussians (`overlay.CameraGaussians`, e.g. pedestrians) composited into each camera's
     set before rasterisation, so they are depth-sorted with the scene; None renders the scene alone.
@@ -351,6 +356,16 @@ def render(
     if background is not None and render_mode not in ("D", "ED"):
         bgs = _as_tensor(background, g.means, "background", (3,)).expand(C, 3)
     deg = g.sh_degree if sh_degree is None else sh_degree
+    if backend == "fused":
+        from . import fused
+
+        if fused.supports(gaussians, camera_model) and fused.available():
+            rgb, depth, alpha = fused.render_fused(
+                gaussians, viewmats, Ks, width, height, render_mode=render_mode, background=bgs,
+                camera_model=camera_model, sh_degree=deg, near_plane=near_plane, far_plane=far_plane,
+                rasterize_mode=rasterize_mode, extra=extra, threads=threads)
+            return RenderOutput(rgb, depth, alpha)
+        backend = "torch"
     raster = rasterization
     if backend == "gsplat":
         from .gsplat_backend import gsplat_rasterization as raster
