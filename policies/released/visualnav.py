@@ -1,4 +1,5 @@
-"""GNM, ViNT and NoMaD as released in visualnav-transformer (`train/vint_train/models/...`), in plain torch.
+"""GNM, ViNT and NoMaD as released in visualnav-transformer (`train/vint_train/models/...`), and LogoNav, the
+policy of the MBRA release (Learning-to-Drive-Anywhere-with-MBRA), in plain torch.
 
 Each network keeps the release's module tree, so `load_state_dict(strict=True)` takes the released weights
 as they are, including the parameters the release carries but never uses (the EfficientNets' ImageNet
@@ -219,3 +220,46 @@ class NoMaDNet(nn.Module):
         """-> (temporal distance `[N, 1]`, waypoints `[N, K, 2]` in normalised units)."""
         cond = self.vision_encoder(obs, goal, goal_masked)
         return self.dist_pred_net(cond), self.waypoints(self.sample_actions(cond, noise=noise, generator=generator))
+
+
+# LogoNav as `train/train.py` of Learning-to-Drive-Anywhere-with-MBRA builds it for training (`IL_gps` with its
+# defaults: 512-d tokens, 2 heads, 2 layers); LOGONAV_DEPLOY_CONFIG is the width its deployment loader's `il2_gps`
+# branch reads from `LogoNav.yaml` (1024-d, 4 heads, 4 layers). `logonav_spec` picks the one a state dict's shapes say.
+LOGONAV_RELEASE = VisualNavSpec(context=5, image_size=(96, 96), len_traj_pred=8, learn_angle=True, encoding_size=512,
+                                heads=2, layers=2)
+LOGONAV_DEPLOY_CONFIG = VisualNavSpec(context=5, image_size=(96, 96), len_traj_pred=8, learn_angle=True,
+                                      encoding_size=1024, heads=4, layers=4)
+
+
+class LogoNavNet(nn.Module):
+    """LogoNav (`il/il.py` `IL_gps`), the point-goal policy distilled from MBRA's reannotated data:
+    `(obs, goal_pose [N, 4]) -> waypoints [N, K, 4]`; `goal_pose` = (x, y in the goal unit, cos, sin of the
+    goal's relative yaw) in the robot frame."""
+
+    def __init__(self, spec: VisualNavSpec = LOGONAV_RELEASE):
+        super().__init__()
+        self.spec = spec
+        d = spec.encoding_size
+        self.obs_encoder = EfficientNetB0(3)
+        self.compress_obs_enc = nn.Linear(1280, d) if d != 1280 else nn.Identity()
+        self.compress_goal_enc = nn.Identity()
+        self.decoder = _ViNTDecoder(d, spec)
+        self.action_predictor = nn.Sequential(nn.Linear(32, spec.len_traj_pred * 4))
+        self.local_goal = nn.Sequential(nn.Linear(4, d))
+
+    def forward(self, obs: torch.Tensor, goal_pose: torch.Tensor) -> torch.Tensor:
+        c, n = self.spec.context, obs.shape[0]
+        g = self.local_goal(goal_pose).unsqueeze(1)
+        o = _tokens(self.compress_obs_enc(self.obs_encoder(_frames(obs, c))), c, n)
+        z = self.decoder(torch.cat([o, g], dim=1))
+        a = self.action_predictor(z).reshape(n, self.spec.len_traj_pred, 4)
+        return torch.cat([a[..., :2].cumsum(dim=1), F.normalize(a[..., 2:], dim=-1)], dim=-1)
+
+
+def logonav_spec(state_dict: dict[str, torch.Tensor]) -> VisualNavSpec:
+    """The LogoNav spec whose widths and depth match `state_dict` (the training or the deployment one)."""
+    width = state_dict["compress_obs_enc.weight"].shape[0] if "compress_obs_enc.weight" in state_dict else None
+    for spec in (LOGONAV_RELEASE, LOGONAV_DEPLOY_CONFIG):
+        if width == spec.encoding_size and f"decoder.sa_decoder.layers.{spec.layers - 1}.linear1.weight" in state_dict:
+            return spec
+    return LOGONAV_RELEASE

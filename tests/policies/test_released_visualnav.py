@@ -1,4 +1,5 @@
-"""GNM, ViNT and NoMaD against the official visualnav-transformer code (fixture `released/visualnav.json`).
+"""GNM, ViNT, NoMaD and LogoNav (MBRA's policy) against their official code (fixtures `released/visualnav.json`,
+`released/logonav.json`).
 
 The fixture holds what the official classes produced on seeded weights (the rule of
 `policies.released.random_weights`) and seeded inputs, with the repository commit it came from. Here the
@@ -18,13 +19,18 @@ import pytest
 import torch
 
 from policies.released import random_weights as rw
-from policies.released.visualnav import GNMNet, NoMaDNet, ViNTNet
+from policies.released.visualnav import LOGONAV_DEPLOY_CONFIG, GNMNet, LogoNavNet, NoMaDNet, ViNTNet, logonav_spec
 from policies.released.weights import load_released
 
-FIXTURE = json.loads((Path(__file__).parents[1] / "fixtures" / "released" / "visualnav.json").read_text())
+_DIR = Path(__file__).parents[1] / "fixtures" / "released"
+FIXTURE = json.loads((_DIR / "visualnav.json").read_text())
+_LOGONAV = json.loads((_DIR / "logonav.json").read_text())
+assert _LOGONAV["seed"] == FIXTURE["seed"]
+FIXTURE["logonav"] = _LOGONAV["logonav"]
 SEED = FIXTURE["seed"]
 TOL = 1e-4
-NETS = {"gnm": GNMNet, "vint": ViNTNet, "nomad": NoMaDNet}
+NETS = {"gnm": GNMNet, "vint": ViNTNet, "nomad": NoMaDNet, "logonav": LogoNavNet}
+RAW = ("nomad", "logonav")  # released as raw state dicts
 OFFICIAL_CLASS = {"gnm": ("vint_train.models.gnm.gnm", "GNM"), "vint": ("vint_train.models.vint.vint", "ViNT")}
 
 
@@ -40,7 +46,7 @@ def _max_err(a, b) -> float:
 def _write_release_file(name: str, net: torch.nn.Module, path: Path) -> None:
     """The file as the release ships it: NoMaD a raw state dict; GNM / ViNT the pickled model object under
     'model' (its class named as the official one) beside optimizer and scheduler state."""
-    if name == "nomad":
+    if name in RAW:
         torch.save(net.state_dict(), path)
         return
     module, cls = OFFICIAL_CLASS[name]
@@ -81,6 +87,9 @@ def _outputs(name: str, net) -> dict[str, torch.Tensor]:
             return {"cond": cond, "dist": net.dist_pred_net(cond),
                     "eps_t9": net.noise_pred_net(noise[0], torch.tensor(9), cond), "ndeltas": nd,
                     "actions": net.waypoints(nd)}
+        if name == "logonav":
+            obs, ins = _input(name, "obs"), FIXTURE[name]["inputs"]
+            return {"action": net(obs, torch.tensor(ins["goal_pose"])), "action_goal2": net(obs, torch.tensor(ins["goal_pose2"]))}
         obs, goal, goal2 = _input(name, "obs"), _input(name, "goal"), _input(name, "goal2")
         d, a = net(obs, goal)
         d2, a2 = net(obs, goal2)
@@ -114,7 +123,8 @@ def test_outputs_match_the_official_code(name, tmp_path):
 @pytest.mark.parametrize("name,layer", [("gnm", "obs_mobilenet.0.0.weight"), ("gnm", "goal_mobilenet.1.conv.0.0.weight"),
                                         ("vint", "obs_encoder._conv_stem.weight"), ("vint", "goal_encoder._blocks.0._depthwise_conv.weight"),
                                         ("nomad", "vision_encoder.obs_encoder._conv_stem.weight"),
-                                        ("nomad", "vision_encoder.goal_encoder._blocks.1._expand_conv.weight")])
+                                        ("nomad", "vision_encoder.goal_encoder._blocks.1._expand_conv.weight"),
+                                        ("logonav", "obs_encoder._conv_stem.weight"), ("logonav", "local_goal.0.weight")])
 def test_a_perturbed_early_layer_fails_the_comparison(name, layer, tmp_path):
     """The outputs depend on the first layers: a 1 % change there breaks parity (the test can fail)."""
     net = _loaded(name, tmp_path)
@@ -128,7 +138,7 @@ def test_a_perturbed_early_layer_fails_the_comparison(name, layer, tmp_path):
 
 def test_vint_and_gnm_goal_changes_the_prediction():
     """The fixture itself is informative: a different goal image moves the official outputs."""
-    for name in ("gnm", "vint"):
+    for name in ("gnm", "vint", "logonav"):
         out = FIXTURE[name]["outputs"]
         assert _max_err(out["action"], out["action_goal2"]) > 1e-2
 
@@ -137,3 +147,12 @@ def test_nomad_goal_mask_changes_the_conditioning():
     """Sample 0 sees the goal, sample 1 has it masked (the release's convention 1 = masked)."""
     assert FIXTURE["nomad"]["inputs"]["goal_mask"] == [0, 1]
     assert FIXTURE["nomad"]["timesteps"] == list(range(9, -1, -1))
+
+
+def test_logonav_deployment_width_is_recognised():
+    """The deployment loader's wider LogoNav (1024-d, 4 layers) has the official keys, and its spec is picked
+    from a state dict's shapes."""
+    wide = LogoNavNet(LOGONAV_DEPLOY_CONFIG)
+    assert rw.manifest(wide.state_dict()) == FIXTURE["logonav"]["manifest_deploy_config"]
+    assert logonav_spec(wide.state_dict()) == LOGONAV_DEPLOY_CONFIG
+    assert logonav_spec(LogoNavNet().state_dict()).encoding_size == 512
