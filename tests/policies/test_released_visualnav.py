@@ -1,5 +1,5 @@
-"""GNM, ViNT, NoMaD and LogoNav (MBRA's policy) against their official code (fixtures `released/visualnav.json`,
-`released/logonav.json`).
+"""GNM, ViNT, NoMaD, LogoNav (MBRA's policy) and CityWalker against their official code (fixtures
+`released/visualnav.json`, `released/logonav.json`, `released/citywalker.json`).
 
 The fixture holds what the official classes produced on seeded weights (the rule of
 `policies.released.random_weights`) and seeded inputs, with the repository commit it came from. Here the
@@ -9,6 +9,7 @@ loader, and the outputs compared (max abs error <= 1e-4); a perturbed early laye
 
 from __future__ import annotations
 
+import copy
 import json
 import sys
 import types
@@ -20,16 +21,21 @@ import torch
 
 from policies.released import random_weights as rw
 from policies.released.visualnav import LOGONAV_DEPLOY_CONFIG, GNMNet, LogoNavNet, NoMaDNet, ViNTNet, logonav_spec
+from policies.released.citywalker import CITYWALKER_RELEASE, CityWalkerNet, CityWalkerSpec
 from policies.released.weights import load_released
 
 _DIR = Path(__file__).parents[1] / "fixtures" / "released"
 FIXTURE = json.loads((_DIR / "visualnav.json").read_text())
-_LOGONAV = json.loads((_DIR / "logonav.json").read_text())
-assert _LOGONAV["seed"] == FIXTURE["seed"]
-FIXTURE["logonav"] = _LOGONAV["logonav"]
+for _name in ("logonav", "citywalker"):
+    _more = json.loads((_DIR / f"{_name}.json").read_text())
+    assert _more["seed"] == FIXTURE["seed"]
+    FIXTURE[_name] = _more[_name]
 SEED = FIXTURE["seed"]
 TOL = 1e-4
-NETS = {"gnm": GNMNet, "vint": ViNTNet, "nomad": NoMaDNet, "logonav": LogoNavNet}
+_CW = FIXTURE["citywalker"]["spec"]
+NETS = {"gnm": GNMNet, "vint": ViNTNet, "nomad": NoMaDNet, "logonav": LogoNavNet,
+        "citywalker": lambda: CityWalkerNet(CityWalkerSpec(encoder=_CW["encoder"], layers=_CW["layers"], heads=_CW["heads"],
+                                                           crop=tuple(_CW["crop"]), resize=tuple(_CW["resize"])))}
 RAW = ("nomad", "logonav")  # released as raw state dicts
 OFFICIAL_CLASS = {"gnm": ("vint_train.models.gnm.gnm", "GNM"), "vint": ("vint_train.models.vint.vint", "ViNT")}
 
@@ -48,6 +54,11 @@ def _write_release_file(name: str, net: torch.nn.Module, path: Path) -> None:
     'model' (its class named as the official one) beside optimizer and scheduler state."""
     if name in RAW:
         torch.save(net.state_dict(), path)
+        return
+    if name == "citywalker":  # a Lightning checkpoint: weights under state_dict, prefixed by the module's `model.`
+        torch.save({"state_dict": {f"model.{k}": v for k, v in net.state_dict().items()}, "epoch": 9, "global_step": 1,
+                    "pytorch-lightning_version": "2.1.0", "hyper_parameters": {"cfg": {"model": {"type": "citywalker_feat"}}},
+                    "optimizer_states": [{"state": {}, "param_groups": []}], "lr_schedulers": []}, path)
         return
     module, cls = OFFICIAL_CLASS[name]
     parts = module.split(".")
@@ -76,6 +87,18 @@ def _loaded(name: str, tmp_path: Path) -> torch.nn.Module:
     return load_released(NETS[name]().eval(), path)
 
 
+@pytest.fixture(scope="module")
+def loaded(tmp_path_factory):
+    """Each model once through a release-format file and the real loader; a fresh copy per use."""
+    cache: dict[str, torch.nn.Module] = {}
+
+    def get(name: str) -> torch.nn.Module:
+        if name not in cache:
+            cache[name] = _loaded(name, tmp_path_factory.mktemp(name))
+        return copy.deepcopy(cache[name])
+    return get
+
+
 def _outputs(name: str, net) -> dict[str, torch.Tensor]:
     with torch.no_grad():
         if name == "nomad":
@@ -87,6 +110,11 @@ def _outputs(name: str, net) -> dict[str, torch.Tensor]:
             return {"cond": cond, "dist": net.dist_pred_net(cond),
                     "eps_t9": net.noise_pred_net(noise[0], torch.tensor(9), cond), "ndeltas": nd,
                     "actions": net.waypoints(nd)}
+        if name == "citywalker":
+            obs = _input(name, "obs").mul(0.25).add(0.5)
+            cord, cord2 = _input(name, "cord").mul(3.0), _input(name, "cord2").mul(3.0)
+            (w, a), (w2, a2) = net(obs, cord), net(obs, cord2)
+            return {"waypoints": w, "arrival": a, "waypoints_cord2": w2, "arrival_cord2": a2}
         if name == "logonav":
             obs, ins = _input(name, "obs"), FIXTURE[name]["inputs"]
             return {"action": net(obs, torch.tensor(ins["goal_pose"])), "action_goal2": net(obs, torch.tensor(ins["goal_pose2"]))}
@@ -113,8 +141,8 @@ def test_inputs_are_the_fixture_inputs(name):
 
 
 @pytest.mark.parametrize("name", sorted(NETS))
-def test_outputs_match_the_official_code(name, tmp_path):
-    net = _loaded(name, tmp_path)
+def test_outputs_match_the_official_code(name, loaded):
+    net = loaded(name)
     got = _outputs(name, net)
     for key, want in FIXTURE[name]["outputs"].items():
         assert _max_err(got[key], want) <= TOL, f"{name}.{key}: max abs error {_max_err(got[key], want):.3g}"
@@ -124,10 +152,12 @@ def test_outputs_match_the_official_code(name, tmp_path):
                                         ("vint", "obs_encoder._conv_stem.weight"), ("vint", "goal_encoder._blocks.0._depthwise_conv.weight"),
                                         ("nomad", "vision_encoder.obs_encoder._conv_stem.weight"),
                                         ("nomad", "vision_encoder.goal_encoder._blocks.1._expand_conv.weight"),
-                                        ("logonav", "obs_encoder._conv_stem.weight"), ("logonav", "local_goal.0.weight")])
-def test_a_perturbed_early_layer_fails_the_comparison(name, layer, tmp_path):
+                                        ("logonav", "obs_encoder._conv_stem.weight"), ("logonav", "local_goal.0.weight"),
+                                        ("citywalker", "obs_encoder.patch_embed.proj.weight"),
+                                        ("citywalker", "compress_goal_enc.weight")])
+def test_a_perturbed_early_layer_fails_the_comparison(name, layer, loaded):
     """The outputs depend on the first layers: a 1 % change there breaks parity (the test can fail)."""
-    net = _loaded(name, tmp_path)
+    net = loaded(name)
     with torch.no_grad():
         w = net.get_parameter(layer)
         w.add_(0.01 * w.std() * torch.from_numpy(rw.rng(1, layer).standard_normal(size=tuple(w.shape))).float())
@@ -136,11 +166,12 @@ def test_a_perturbed_early_layer_fails_the_comparison(name, layer, tmp_path):
     assert max(errs.values()) > TOL, errs
 
 
-def test_vint_and_gnm_goal_changes_the_prediction():
+def test_the_goal_changes_the_official_prediction():
     """The fixture itself is informative: a different goal image moves the official outputs."""
-    for name in ("gnm", "vint", "logonav"):
+    for name, a, b in (("gnm", "action", "action_goal2"), ("vint", "action", "action_goal2"),
+                       ("logonav", "action", "action_goal2"), ("citywalker", "waypoints", "waypoints_cord2")):
         out = FIXTURE[name]["outputs"]
-        assert _max_err(out["action"], out["action_goal2"]) > 1e-2
+        assert _max_err(out[a], out[b]) > 1e-2
 
 
 def test_nomad_goal_mask_changes_the_conditioning():
@@ -156,3 +187,10 @@ def test_logonav_deployment_width_is_recognised():
     assert rw.manifest(wide.state_dict()) == FIXTURE["logonav"]["manifest_deploy_config"]
     assert logonav_spec(wide.state_dict()) == LOGONAV_DEPLOY_CONFIG
     assert logonav_spec(LogoNavNet().state_dict()).encoding_size == 512
+
+
+def test_citywalker_release_size_has_the_official_keys():
+    """The released size (DINOv2 ViT-B/14, 16 layers) has the official state dict; built on the meta device."""
+    with torch.device("meta"):
+        net = CityWalkerNet(CITYWALKER_RELEASE)
+    assert rw.manifest(net.state_dict()) == FIXTURE["citywalker"]["manifest_release"]
