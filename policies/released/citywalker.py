@@ -107,9 +107,15 @@ class CityWalkerNet(nn.Module):
             x = F.interpolate(x, size=self.spec.resize, mode="bilinear", align_corners=False, antialias=True)
         return x
 
-    def forward(self, obs: torch.Tensor, cord: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def trunk(self, obs: torch.Tensor, cord: torch.Tensor) -> torch.Tensor:
+        """-> the MLP's 32 features `[B, 32]`."""
         b, n = obs.shape[:2]
         feats = self.obs_encoder(self.encoder_input(obs.reshape(b * n, *obs.shape[2:]))).view(b, n, -1)
         goal = self.compress_goal_enc(self.cord_embedding(cord).reshape(b, -1)).view(b, 1, -1)
-        z = self.predictor_mlp(self.predictor(torch.cat([feats, goal], dim=1)).reshape(b, -1))
-        return self.wp_predictor(z).view(b, self.spec.len_traj_pred, 2).cumsum(dim=1), self.arrive_predictor(z)
+        return self.predictor_mlp(self.predictor(torch.cat([feats, goal], dim=1)).reshape(b, -1))
+
+    def heads(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.wp_predictor(z).view(z.shape[0], self.spec.len_traj_pred, 2).cumsum(dim=1), self.arrive_predictor(z)
+
+    def forward(self, obs: torch.Tensor, cord: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.heads(self.trunk(obs, cord))

@@ -136,13 +136,13 @@ class DDPMSampler:
         """Shape of the `noise` argument of `sample`: the start sample, then one draw per step with t > 0."""
         return (self.steps, n, horizon, dim)
 
-    @torch.no_grad()
     def sample(self, denoiser, cond: torch.Tensor, horizon: int, dim: int = 2, *, noise: torch.Tensor | None = None,
                generator: torch.Generator | None = None) -> torch.Tensor:
         """`denoiser(x, t, cond) -> eps`; returns the normalised sample `[N, horizon, dim]`.
 
         `noise` `[steps, N, horizon, dim]`: `noise[0]` is x_T, `noise[k]` the draw added at the k-th step
-        (steps T-1 .. 1 in order); drawn from `generator` when not given."""
+        (steps T-1 .. 1 in order); drawn from `generator` when not given. Differentiable (wrap in `no_grad`
+        for sampling only); all-zero `noise` gives the deterministic chain the PPO mean uses."""
         n = cond.shape[0]
         shape = self.noise_shape(n, horizon, dim)
         if noise is None:

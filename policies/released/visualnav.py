@@ -101,12 +101,18 @@ class ViNTNet(nn.Module):
         self.dist_predictor = nn.Sequential(nn.Linear(32, 1))
         self.action_predictor = nn.Sequential(nn.Linear(32, spec.len_traj_pred * (4 if spec.learn_angle else 2)))
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def trunk(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """-> the decoder's 32 features `[N, 32]` (what both heads read)."""
         c, n = self.spec.context, obs.shape[0]
         g = self.compress_goal_enc(self.goal_encoder(torch.cat([obs[:, 3 * c:], goal], dim=1))).unsqueeze(1)
         o = _tokens(self.compress_obs_enc(self.obs_encoder(_frames(obs, c))), c, n)
-        z = self.decoder(torch.cat([o, g], dim=1))
+        return self.decoder(torch.cat([o, g], dim=1))
+
+    def heads(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.dist_predictor(z), _waypoints(self.action_predictor(z), self.spec)
+
+    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.heads(self.trunk(obs, goal))
 
 
 class _ViNTDecoder(nn.Module):
@@ -142,12 +148,16 @@ class GNMNet(nn.Module):
         self.dist_predictor = nn.Sequential(nn.Linear(32, 1))
         self.action_predictor = nn.Sequential(nn.Linear(32, spec.len_traj_pred * (4 if spec.learn_angle else 2)))
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def trunk(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         pool = lambda x: F.adaptive_avg_pool2d(x, 1).flatten(1)  # noqa: E731
         o = self.compress_observation(pool(self.obs_mobilenet(obs)))
         g = self.compress_goal(pool(self.goal_mobilenet(torch.cat([obs, goal], dim=1))))
-        z = self.linear_layers(torch.cat([o, g], dim=1))
-        return self.dist_predictor(z), _waypoints(self.action_predictor(z), self.spec)
+        return self.linear_layers(torch.cat([o, g], dim=1))
+
+    heads = ViNTNet.heads
+
+    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.heads(self.trunk(obs, goal))
 
 
 class NoMaDVisionEncoder(nn.Module):
@@ -247,13 +257,17 @@ class LogoNavNet(nn.Module):
         self.action_predictor = nn.Sequential(nn.Linear(32, spec.len_traj_pred * 4))
         self.local_goal = nn.Sequential(nn.Linear(4, d))
 
-    def forward(self, obs: torch.Tensor, goal_pose: torch.Tensor) -> torch.Tensor:
+    def trunk(self, obs: torch.Tensor, goal_pose: torch.Tensor) -> torch.Tensor:
         c, n = self.spec.context, obs.shape[0]
         g = self.local_goal(goal_pose).unsqueeze(1)
         o = _tokens(self.compress_obs_enc(self.obs_encoder(_frames(obs, c))), c, n)
-        z = self.decoder(torch.cat([o, g], dim=1))
-        a = self.action_predictor(z).reshape(n, self.spec.len_traj_pred, 4)
-        return torch.cat([a[..., :2].cumsum(dim=1), F.normalize(a[..., 2:], dim=-1)], dim=-1)
+        return self.decoder(torch.cat([o, g], dim=1))
+
+    def heads(self, z: torch.Tensor) -> torch.Tensor:
+        return _waypoints(self.action_predictor(z), self.spec)
+
+    def forward(self, obs: torch.Tensor, goal_pose: torch.Tensor) -> torch.Tensor:
+        return self.heads(self.trunk(obs, goal_pose))
 
 
 def logonav_spec(state_dict: dict[str, torch.Tensor]) -> VisualNavSpec:

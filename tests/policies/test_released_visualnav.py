@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +34,6 @@ _CW = FIXTURE["citywalker"]["spec"]
 NETS = {"gnm": GNMNet, "vint": ViNTNet, "nomad": NoMaDNet, "logonav": LogoNavNet,
         "citywalker": lambda: CityWalkerNet(CityWalkerSpec(encoder=_CW["encoder"], layers=_CW["layers"], heads=_CW["heads"],
                                                            crop=tuple(_CW["crop"]), resize=tuple(_CW["resize"])))}
-RAW = ("nomad", "logonav")  # released as raw state dicts
-OFFICIAL_CLASS = {"gnm": ("vint_train.models.gnm.gnm", "GNM"), "vint": ("vint_train.models.vint.vint", "ViNT")}
 
 
 def _input(model: str, name: str) -> torch.Tensor:
@@ -49,41 +45,11 @@ def _max_err(a, b) -> float:
     return float((torch.as_tensor(a, dtype=torch.float64) - torch.as_tensor(b, dtype=torch.float64)).abs().max())
 
 
-def _write_release_file(name: str, net: torch.nn.Module, path: Path) -> None:
-    """The file as the release ships it: NoMaD a raw state dict; GNM / ViNT the pickled model object under
-    'model' (its class named as the official one) beside optimizer and scheduler state."""
-    if name in RAW:
-        torch.save(net.state_dict(), path)
-        return
-    if name == "citywalker":  # a Lightning checkpoint: weights under state_dict, prefixed by the module's `model.`
-        torch.save({"state_dict": {f"model.{k}": v for k, v in net.state_dict().items()}, "epoch": 9, "global_step": 1,
-                    "pytorch-lightning_version": "2.1.0", "hyper_parameters": {"cfg": {"model": {"type": "citywalker_feat"}}},
-                    "optimizer_states": [{"state": {}, "param_groups": []}], "lr_schedulers": []}, path)
-        return
-    module, cls = OFFICIAL_CLASS[name]
-    parts = module.split(".")
-    names = [".".join(parts[:i]) for i in range(1, len(parts) + 1)]
-    saved = {k: sys.modules.get(k) for k in names}
-    for k in names:
-        sys.modules[k] = types.ModuleType(k)
-    official = type(cls, (type(net),), {"__module__": module})
-    setattr(sys.modules[module], cls, official)
-    try:
-        net.__class__ = official
-        opt = torch.optim.AdamW(net.parameters(), lr=1e-4)
-        torch.save({"model": net, "optimizer": opt, "scheduler": torch.optim.lr_scheduler.CosineAnnealingLR(opt, 10),
-                    "epoch": 29}, path)
-    finally:
-        net.__class__ = official.__mro__[1]
-        for k, v in saved.items():
-            sys.modules.pop(k) if v is None else sys.modules.__setitem__(k, v)
-
-
 def _loaded(name: str, tmp_path: Path) -> torch.nn.Module:
     src = NETS[name]().eval()
     src.load_state_dict(rw.seeded_state_dict(src, SEED))
     path = tmp_path / f"{name}.pth"
-    _write_release_file(name, src, path)
+    rw.write_release_file(name, src, path)
     return load_released(NETS[name]().eval(), path)
 
 
