@@ -212,8 +212,10 @@ def test_our_server_speaks_their_contract():
         conn = http.client.HTTPConnection("127.0.0.1", srv.server_address[1], timeout=10)
         conn.request("POST", "/nogoal_step", body=body, headers={"Content-Type": ctype})
         ans = json.loads(conn.getresponse().read())
-        assert np.asarray(ans["trajectory"]).shape == (3, 2, 2)
-        assert np.asarray(ans["all_trajectory"]).shape == (3, 1, 2, 2) and np.asarray(ans["all_values"]).shape == (3, 1)
+        traj = np.asarray(ans["trajectory"])
+        assert traj.shape == (3, 3, 2) and not traj[:, 0].any()    # the robot, then the K = 2 waypoints
+        np.testing.assert_allclose(traj[:, 1:], policy.act(policy.seen[-1]), atol=1e-6)
+        assert np.asarray(ans["all_trajectory"]).shape == (3, 1, 3, 2) and np.asarray(ans["all_values"]).shape == (3, 1)
         conn.request("POST", "/pixelgoal_step", body=body, headers={"Content-Type": ctype})
         assert conn.getresponse().status == 404
         conn.close()
@@ -237,3 +239,17 @@ def test_benchmark_records_through_navdp_equal_in_process(prepared_demo_scene, d
     assert len(via) == 4 and all(r["policy_error"] == "" for r in via)
     strip = lambda rs: [{k: v for k, v in r.items() if k not in ("seconds", "wall_seconds")} for r in rs]  # noqa: E731
     assert strip(via) == strip(direct)
+
+
+def test_our_client_and_server_together_equal_in_process():
+    policy = GoalVectorPolicy(num_waypoints=6)
+    srv = NavDPServer(policy)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    try:
+        client = NavDPPolicy(srv.url, goal="point", num_waypoints=6)
+        for new in ([True] * 3, [False, True, False]):
+            np.testing.assert_array_equal(client.act(_step_obs(3, new)), policy.act(_step_obs(3, new)).astype(np.float32))
+        client.close()
+    finally:
+        srv.shutdown()
+        srv.server_close()

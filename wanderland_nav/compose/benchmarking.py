@@ -247,7 +247,7 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     header, scenes = benchmark_scenes(c)
     results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
     if c.released_weights:
-        skipped += [f"released model {m}: not run, no weights" for m in released_weights_policies(c.released_weights)[1]]
+        skipped += [f"released model {m}" for m in released_weights_policies(c.released_weights)[1]]
     for task in tasks:
         for entry in entries:
             bad = hidden_reads(task, entry.reads)

@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from policies import make_policy
+from policies.released.policy import ReleasedConfig
 from wanderland_nav.cache import file_sha256
 from wanderland_nav.external import ExternalActor
 from wanderland_nav.external.navdp import NavDPPolicy
@@ -23,6 +24,12 @@ RELEASED_FILES = {"gnm": ("gnm_large.pth", "gnm.pth"), "vint": ("vint.pth",), "n
                   "mbra": ("logonav.pth", "mbra.pth"), "citywalker": ("citywalker.ckpt", "CityWalker_2000hr.ckpt")}
 NAVDP_KEYS = ("navdp_goal", "num_waypoints", "hfov_deg", "stop_threshold", "image_size")
 COMMON_KEYS = ("name", "timeout_s", "max_consecutive_failures")
+
+
+def released_weights(policy) -> str | None:
+    """The released file a policy was built from (`policy=released policy.weights=...`), else None."""
+    cfg = getattr(policy, "config", None)
+    return cfg.weights if isinstance(cfg, ReleasedConfig) and cfg.weights else None
 
 
 def released_policy(spec: dict, device: str = "cpu"):
@@ -56,7 +63,7 @@ def released_weights_policies(folder: str | Path) -> tuple[list[dict], list[str]
     for model, names in RELEASED_FILES.items():
         path = next((root / n for n in names if (root / n).is_file()), None)
         if path is None:
-            missing.append(f"{model} (none of {list(names)} in {root})")
+            missing.append(f"{model}: not run, no weights (none of {list(names)} in {root})")
         else:
             found.append({"name": model, "model": model, "weights": str(path)})
     return found, missing

@@ -269,6 +269,7 @@ class _Handler(BaseHTTPRequestHandler):
             log.exception("policy raised")
             return self._send_json(500, {"error": f"policy raised {type(e).__name__}: {e}"})
         b = traj.shape[0]
+        traj = np.concatenate([np.zeros((b, 1, 2), np.float32), traj], axis=1)  # theirs start at the robot
         self._send_json(200, {"trajectory": traj.tolist(), "all_trajectory": traj[:, None].tolist(),
                               "all_values": np.zeros((b, 1)).tolist()})
 
@@ -279,7 +280,8 @@ class _Handler(BaseHTTPRequestHandler):
 class NavDPServer(ThreadingHTTPServer):
     """Any protocol policy behind NavDP's contract. The server keeps each env's last `context` frames (their
     servers keep the history; their requests carry the current frame), cleared by `/navigator_reset_env`, and flags
-    `NEW_EPISODE` on an env's first step. Its answer: the policy's K waypoints as the trajectory (C = 2),
+    `NEW_EPISODE` on an env's first step. Its answer: the robot's position then the policy's K waypoints as the
+    trajectory (`[B, K + 1, 2]`, their trajectories start at the robot),
     `all_trajectory` that one trajectory, `all_values` zeros (a protocol policy has no value estimate; the
     visualnav baselines' servers answer zeros too). `stop_threshold` and the intrinsic are accepted and unused.
     A policy reading keys the contract does not carry (past positions, instructions) is refused."""
