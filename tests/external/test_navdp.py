@@ -253,3 +253,26 @@ def test_our_client_and_server_together_equal_in_process():
     finally:
         srv.shutdown()
         srv.server_close()
+
+
+def test_serve_policy_speaks_navdp():
+    from wanderland_nav.serve_policy import make_server
+
+    srv = make_server(compose_config("serve_policy", ["target=wanderland_nav.external.examples:GoalVectorPolicy",
+                                                      "protocol=navdp", "port=0"]))
+    assert isinstance(srv, NavDPServer)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    try:
+        client = NavDPPolicy(srv.url, goal="point", num_waypoints=5)
+        np.testing.assert_array_equal(client.act(_step_obs(3, [True] * 3)),
+                                      GoalVectorPolicy().act(_step_obs(3, [True] * 3)).astype(np.float32))
+        assert client.algo == "GoalVectorPolicy"
+        client.close()
+    finally:
+        srv.shutdown()
+        srv.server_close()
+    with pytest.raises(ValueError, match="protocol='grpc'"):
+        make_server(compose_config("serve_policy", ["target=wanderland_nav.external.examples:GoalVectorPolicy",
+                                                    "protocol=grpc"]))
+    with pytest.raises(ValueError, match="exactly one of"):
+        make_server(compose_config("serve_policy", ["model=nomad", "checkpoint=x.pt"]))
