@@ -58,12 +58,14 @@ def test_bad_model_entry_is_named(prepared_demo_scene, tmp_path):
         run(cfg)
 
 
-def test_released_model_is_a_warm_start_for_ppo(demo_episodes, weights, tmp_path):
+@pytest.mark.parametrize("model,file", [("gnm", "gnm_large.pth"), ("nomad", "nomad.pth")])
+def test_released_model_is_a_warm_start_for_ppo(demo_episodes, weights, tmp_path, model, file):
+    """PPO from the released weights (NoMaD: through its zero-noise DDPM chain), no BC."""
     from wanderland_nav.train import run as train
 
     res = train(compose_config("train", ["debug=smoke", f"scene={demo_episodes.parent}", f"run_dir={tmp_path / 'run'}",
-                                         "render.lod_px=4", "policy=released", "policy.model=gnm",
-                                         f"policy.weights={weights / 'gnm_large.pth'}", "policy.image_size=null",
+                                         "render.lod_px=4", "policy=released", f"policy.model={model}",
+                                         f"policy.weights={weights / file}", "policy.image_size=null",
                                          "algo.bc.enabled=false", "eval.blank_camera_rows=false"]))
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert list(results) == ["released", "RL"]  # the release's own row first, then PPO from it (no BC)
