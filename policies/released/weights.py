@@ -89,8 +89,15 @@ def _rebuild_parameter(data: torch.Tensor, *_ignored) -> torch.Tensor:
     return data
 
 
+def _rebuild_from_type(func, _new_type, args, _state):
+    """`torch._tensor._rebuild_from_type_v2` (a tensor with Python attributes): the plain tensor. `func` came
+    through `find_class`, so it is one of the tensor rebuilds here or an inert stand-in."""
+    return func(*args)
+
+
 _ALLOWED = {
     ("torch._utils", "_rebuild_tensor_v2"): _rebuild_tensor,
+    ("torch._tensor", "_rebuild_from_type_v2"): _rebuild_from_type,
     ("torch._utils", "_rebuild_parameter"): _rebuild_parameter,
     ("torch._utils", "_rebuild_parameter_with_state"): _rebuild_parameter,
     ("collections", "OrderedDict"): collections.OrderedDict,

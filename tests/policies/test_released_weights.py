@@ -117,3 +117,11 @@ def test_views_share_storage_correctly(tmp_path):
     out = read_checkpoint(path)
     assert torch.equal(out["a"], base[4:10]) and torch.equal(out["b"], base.view(4, 6).t())
     assert out["c"].shape == () and float(out["c"]) == 7.0 and out["h"].dtype == torch.float16
+
+
+def test_tensor_with_attributes_is_a_plain_tensor(tmp_path):
+    t = torch.arange(3.0)
+    t.note = "kept by torch as Python state"
+    torch.save({"w": t}, tmp_path / "attr.pth")
+    out = read_checkpoint(tmp_path / "attr.pth")
+    assert torch.equal(out["w"], torch.arange(3.0)) and not hasattr(out["w"], "note")
