@@ -1,6 +1,8 @@
 """Navigation policies behind one contract (see `policies.base`).
 
-`make_policy(name, **kwargs)` builds one by name: "cnn", "citywalker", "nomad", "mbra", "instruction"; kwargs are the
+`make_policy(name, **kwargs)` builds one by name: "cnn", "citywalker", "nomad", "mbra", "instruction", and
+"released" (a released checkpoint's own architecture: `model=gnm|vint|nomad|logonav|citywalker`, `weights=<file>`,
+`policies.released.policy`); kwargs are the
 fields of that policy's config dataclass (`policies/<name>/config.py`).
 """
 
@@ -10,7 +12,7 @@ import dataclasses
 
 from policies.base import NavPolicy, WaypointNormal
 
-POLICY_NAMES = ("cnn", "citywalker", "nomad", "mbra", "instruction")
+POLICY_NAMES = ("cnn", "citywalker", "nomad", "mbra", "instruction", "released")
 
 
 def _classes(name: str):
@@ -22,6 +24,8 @@ def _classes(name: str):
         from policies.nomad import NoMaDConfig as Cfg, NoMaDPolicy as Pol
     elif name == "mbra":
         from policies.mbra import MBRAConfig as Cfg, MBRAPolicy as Pol
+    elif name == "released":
+        from policies.released.policy import ReleasedConfig as Cfg, ReleasedPolicy as Pol
     elif name == "instruction":
         from policies.instruction import InstructionConfig as Cfg, InstructionPolicy as Pol
     else:

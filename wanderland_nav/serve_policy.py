@@ -2,9 +2,12 @@
 
     python -m wanderland_nav.serve_policy target=my_pkg.my_module:MyPolicy [port=8765]
     python -m wanderland_nav.serve_policy checkpoint=outputs/.../checkpoints/last.pt
+    python -m wanderland_nav.serve_policy model=nomad weights=/weights/nomad.pth protocol=navdp port=8888
 
 Prints `serving <policy> at http://127.0.0.1:<port>` once it accepts requests (`port=0`: a free port) and serves
-until stopped. The evaluator reaches it with `policies=[{name: ..., url: http://127.0.0.1:<port>}]`.
+until stopped. The evaluator reaches it with `policies=[{name: ..., url: http://127.0.0.1:<port>}]`; with
+`protocol=navdp` it speaks NavDP's contract instead (`wanderland_nav.external.navdp`), for their benchmark or
+`policies=[{name: ..., navdp_url: http://127.0.0.1:<port>}]`.
 """
 
 from __future__ import annotations
@@ -19,17 +22,26 @@ from wanderland_nav.compose.cli import CONF_DIR
 from wanderland_nav.compose.schema import ServePolicyConfig
 from wanderland_nav.external.actor import NavPolicyAsExternal
 from wanderland_nav.external.protocol import load_target
+from wanderland_nav.compose.policy_sources import released_policy
+from wanderland_nav.external.navdp import NavDPServer
 from wanderland_nav.external.server import PolicyServer
 
 
-def make_server(cfg: DictConfig) -> PolicyServer:
+def make_server(cfg: DictConfig) -> PolicyServer | NavDPServer:
     """The bound (not yet serving) server of the composed config."""
     c: ServePolicyConfig = typed_config(cfg, ServePolicyConfig)
-    if bool(c.target) == bool(c.checkpoint):
-        raise ValueError("serve_policy: give exactly one of target=pkg.mod:Class or checkpoint=<file.pt>")
-    policy = load_target(c.target, c.kwargs) if c.target else NavPolicyAsExternal(policy_from_checkpoint(c.checkpoint,
-                                                                                                         c.device)[0])
-    return PolicyServer(policy, c.host, c.port)
+    if [bool(c.target), bool(c.checkpoint), bool(c.model)].count(True) != 1:
+        raise ValueError("serve_policy: give exactly one of target=pkg.mod:Class, checkpoint=<file.pt> or "
+                         "model=<released model> weights=<file>")
+    if c.protocol not in ("wanderland", "navdp"):
+        raise ValueError(f"serve_policy.protocol={c.protocol!r}: expected wanderland or navdp")
+    if c.target:
+        policy = load_target(c.target, c.kwargs)
+    elif c.checkpoint:
+        policy = NavPolicyAsExternal(policy_from_checkpoint(c.checkpoint, c.device)[0])
+    else:
+        policy = NavPolicyAsExternal(released_policy({"model": c.model, "weights": c.weights}, c.device)[0])
+    return (NavDPServer if c.protocol == "navdp" else PolicyServer)(policy, c.host, c.port)
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="serve_policy")

@@ -17,6 +17,7 @@ TINY = {  # small enough for milliseconds per step
     "nomad": dict(image_size=(16, 16), dim=16, depth=1, heads=2, unet_hidden=16, use_goal_vector=True),
     "mbra": dict(image_size=(16, 16), dim=16, depth=1, heads=2),
     "instruction": dict(image_size=(16, 16), dim=16, depth=1, heads=2, text_layers=1, max_tokens=32),
+    "released": dict(model="gnm"),  # the smallest released architecture, at its own sizes
 }
 
 

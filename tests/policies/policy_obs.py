@@ -14,6 +14,8 @@ TINY = {
     "nomad": dict(image_size=(32, 32), dim=32, depth=1, heads=2, unet_hidden=16, use_goal_vector=True),
     "mbra": dict(image_size=(32, 32), dim=32, depth=1, heads=2),
     "instruction": dict(image_size=(32, 32), dim=32, depth=1, heads=2, text_layers=1, max_tokens=24),
+    # the smallest released architecture (its sizes are the release's); the stop rule off so waypoints move
+    "released": dict(model="gnm", stop_distance=-1e9),
 }
 
 

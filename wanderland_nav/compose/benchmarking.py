@@ -30,6 +30,7 @@ from wanderland_nav.compose.build import (blind_env_config, env_factory, load_na
                                           scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.comparison import stored_env_config
 from wanderland_nav.compose.identity import scene_identity
+from wanderland_nav.compose.policy_sources import navdp_actor, released_policy, released_weights_policies
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set
 from wanderland_nav.compose.schema import BenchmarkConfig
@@ -45,7 +46,7 @@ from wanderland_nav.tasks import SUCCESS_RULE, check_reads, check_task_episodes,
 from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.benchmark")
-SOURCES = ("reference", "checkpoint", "target", "url")
+SOURCES = ("reference", "checkpoint", "target", "url", "model", "navdp_url")
 GROUPS = ("overall", "indoor", "outdoor")
 IMAGE_KEYS = {keys.RGB, keys.DEPTH, keys.GOAL_IMAGE}
 
@@ -67,10 +68,11 @@ class Entry:
 
 def policy_entries(c: BenchmarkConfig) -> list[Entry]:
     """The configured policies, built (a remote server is contacted, a target imported, a checkpoint loaded)."""
-    if not c.policies:
+    found = released_weights_policies(c.released_weights)[0] if c.released_weights else []
+    if not c.policies and not found:
         raise ValueError("benchmark: no policies; e.g. policies='[{name: expert, reference: expert}]'")
     out, seen = [], set()
-    for i, raw in enumerate(c.policies):
+    for i, raw in enumerate([*c.policies, *found]):
         spec = OmegaConf.to_container(raw, resolve=True) if OmegaConf.is_config(raw) else dict(raw)
         name = str(spec.get("name") or "")
         given = [s for s in SOURCES if spec.get(s)]
@@ -94,6 +96,15 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
             out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), env_cfg, size,
                              str(conf.get("goal_input") or "goal"), file_sha256(spec["checkpoint"])))
             continue
+        if src == "model":
+            policy, content = released_policy(spec, c.device)
+            out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), content=content))
+            continue
+        if src == "navdp_url":
+            actor = navdp_actor(spec, timeout, int(spec.get("max_consecutive_failures", c.max_consecutive_failures)),
+                                c.image_size)
+            out.append(Entry(name, spec, src, tuple(actor.in_keys), actor))
+            continue
         inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else RemotePolicy(spec["url"], timeout)
         actor = ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
                               max_consecutive_failures=int(spec.get("max_consecutive_failures",
@@ -115,7 +126,7 @@ def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, nav
         env_cfg = blind_env_config(c.env)
     else:
         base = entry.env_config if entry.env_config is not None else c.env
-        env_cfg = shaped_env_config(base, entry.actor.policy if entry.source == "checkpoint" else entry.actor,
+        env_cfg = shaped_env_config(base, entry.actor.policy if entry.source in ("checkpoint", "model") else entry.actor,
                                     entry.image_size)
         if not set(entry.reads) & IMAGE_KEYS:  # a policy that never looks gets no rendering
             env_cfg = blind_env_config(env_cfg)
@@ -235,6 +246,8 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
         raise ValueError(f"benchmark baseline={baseline!r}: not among the policies {[e.name for e in entries]}")
     header, scenes = benchmark_scenes(c)
     results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
+    if c.released_weights:
+        skipped += [f"released model {m}" for m in released_weights_policies(c.released_weights)[1]]
     for task in tasks:
         for entry in entries:
             bad = hidden_reads(task, entry.reads)

@@ -30,6 +30,8 @@ def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfi
     kinematics = dataclasses.replace(env.kinematics, num_waypoints=need.num_waypoints, action_mode=need.action_mode)
     reads = set(getattr(policy, "in_keys", ()))  # a policy that reads the goal view gets the key on point-goal tasks too
     goal_view = True if keys.GOAL_IMAGE in reads else env.observe_goal_image
+    if keys.DEPTH in reads:  # a policy that reads depth gets it rendered
+        camera = dataclasses.replace(camera, depth=True)
     return dataclasses.replace(env, camera=camera, kinematics=kinematics, observe_goal_image=goal_view)
 
 

@@ -412,7 +412,8 @@ class BenchmarkConfig:
     route_lookahead: float = 3.0
     policies: List[Any] = field(default_factory=lambda: [{"name": "expert", "reference": "expert"},
                                                           {"name": "random", "reference": "random"}])
-    # [{name, reference|checkpoint|target|url, ...}]
+    # [{name, reference|checkpoint|target|url|model|navdp_url, ...}]
+    released_weights: Optional[str] = None  # a folder of released files: one `model` entry per file found
     baseline: Optional[str] = None       # the policy the paired differences are against (null: the first)
     episodes: Optional[str] = None
     demo_episodes: int = at_least(1, 60)
@@ -434,6 +435,9 @@ class ServePolicyConfig:
     target: Optional[str] = None         # pkg.module:Class (a protocol policy, wanderland_nav.external.protocol)
     kwargs: Dict[str, Any] = field(default_factory=dict)
     checkpoint: Optional[str] = None     # or a trained checkpoint of a package policy
+    model: Optional[str] = None          # or a released model (gnm|vint|nomad|mbra|citywalker) ...
+    weights: Optional[str] = None        # ... with its released file
+    protocol: str = "wanderland"         # wanderland (/info, /act, .npz) | navdp (NavDP's contract)
     host: str = "127.0.0.1"
     port: int = at_least(0, 8765)        # 0: a free port (the printed url says which)
     device: str = "cpu"

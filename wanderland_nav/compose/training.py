@@ -14,6 +14,7 @@ from wanderland_nav.compose.build import (check_policy_config, env_factory, load
                                           make_policy_from_config, scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
+from wanderland_nav.compose.policy_sources import released_weights
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import TrainConfig
@@ -125,6 +126,8 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
         load_policy_weights(policy, c.init_checkpoint)
         policy.pretrained_from = str(c.init_checkpoint)
         first = "init"
+    elif released_weights(policy):  # a released model's own weights: its first row is the release, not "untrained"
+        first = "released"
     elif getattr(policy, "pretrained_from", None) is None:
         log.info("policy %s: randomly initialised (no init_checkpoint)", c.policy.get("name"))
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
