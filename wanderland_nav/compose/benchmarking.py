@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import difflib
 import io
 import json
 import logging
@@ -46,6 +47,7 @@ from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.benchmark")
 SOURCES = ("reference", "checkpoint", "target", "url")
+ENTRY_KEYS = {"name", *SOURCES, "kwargs", "timeout_s", "max_consecutive_failures"}  # a policy entry's keys
 GROUPS = ("overall", "indoor", "outdoor")
 IMAGE_KEYS = {keys.RGB, keys.DEPTH, keys.GOAL_IMAGE}
 
@@ -72,6 +74,11 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
     out, seen = [], set()
     for i, raw in enumerate(c.policies):
         spec = OmegaConf.to_container(raw, resolve=True) if OmegaConf.is_config(raw) else dict(raw)
+        unknown = sorted(set(spec) - ENTRY_KEYS)
+        if unknown:  # `timeout: 1` for `timeout_s` would run with no limit at all
+            near = difflib.get_close_matches(unknown[0], ENTRY_KEYS, n=1)
+            raise ValueError(f"benchmark policies[{i}]: unknown key {unknown[0]!r}"
+                             + (f" (did you mean {near[0]!r}?)" if near else "") + f"; known: {sorted(ENTRY_KEYS)}")
         name = str(spec.get("name") or "")
         given = [s for s in SOURCES if spec.get(s)]
         if not name or len(given) != 1:

@@ -70,7 +70,8 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
         goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, scene.products, Path(scene.root)], env_cfg.camera.height,
                                        env_cfg.camera.width, where=where)
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
-                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)
+                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images,
+                   episodes_source=where if split is None else f"{where} (split {split})")
 
 
 def load_navmesh(scene):
