@@ -14,9 +14,11 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import load_goal_images
 from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.episodes import load_episodes
+from wanderland_nav.render import Gaussians
 from wanderland_nav.render.lod import load_splat
 from wanderland_nav.rl.checkpoint import load_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
+from wanderland_nav.scene.checks import check_splat_visible
 from wanderland_nav import viz
 
 
@@ -49,6 +51,7 @@ def scene_gaussians(scene, lod_px: float | None, *, needed: bool = True):
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
                                 "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
                                 "turn the camera off (env.camera.enabled=false)")
+    check_splat_visible(Gaussians.load(path), scene.cameras, path)  # never a silently blank camera
     return load_splat(path, lod_px)
 
 
