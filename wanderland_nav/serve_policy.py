@@ -29,7 +29,7 @@ def make_server(cfg: DictConfig) -> PolicyServer:
         raise ValueError("serve_policy: give exactly one of target=pkg.mod:Class or checkpoint=<file.pt>")
     policy = load_target(c.target, c.kwargs) if c.target else NavPolicyAsExternal(policy_from_checkpoint(c.checkpoint,
                                                                                                          c.device)[0])
-    return PolicyServer(policy, c.host, c.port)
+    return PolicyServer(policy, c.host, c.port, max_body_bytes=c.max_body_mb << 20, allowed_hosts=tuple(c.allowed_hosts))
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="serve_policy")

@@ -430,6 +430,8 @@ class ServePolicyConfig:
     host: str = "127.0.0.1"
     port: int = at_least(0, 8765)        # 0: a free port (the printed url says which)
     device: str = "cpu"
+    max_body_mb: int = at_least(1, 64)   # the largest request body read (its arrays bounded the same, uncompressed)
+    allowed_hosts: List[str] = field(default_factory=list)  # Host names accepted besides IP addresses and localhost
 
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,

@@ -21,8 +21,11 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from wanderland_nav.external.protocol import PROTOCOL
+from wanderland_nav.external.protocol import PROTOCOL, describe
 from wanderland_nav.external.wire import CONTENT_TYPE, pack, unpack
+
+
+MAX_ANSWER_BYTES = 16 << 20  # waypoints [B, K, 2] float32: 64 kB for 1024 agents of 8 waypoints
 
 
 class RemotePolicyError(RuntimeError):
@@ -54,6 +57,7 @@ class RemotePolicy:
             self.observes = tuple(info["observes"])
             self.num_waypoints, self.context = int(info["num_waypoints"]), int(info["context"])
             self.image_size = tuple(info["image_size"]) if info.get("image_size") else None
+            describe(self)  # the same checks and bounds as an in-process policy's
         except (KeyError, TypeError, ValueError) as e:
             raise RemotePolicyError(f"{self.url}/info: malformed declaration {info!r} ({e})") from None
 
@@ -100,7 +104,7 @@ class RemotePolicy:
         if not ctype.startswith(CONTENT_TYPE):
             raise RemotePolicyError(f"{where}: answered Content-Type {ctype!r}, expected {CONTENT_TYPE}")
         try:
-            arrays = unpack(data, where)
+            arrays = unpack(data, where, max_bytes=MAX_ANSWER_BYTES, keys=("waypoints",))
         except ValueError as e:
             raise RemotePolicyError(str(e)) from None
         if "waypoints" not in arrays:
