@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from pathlib import Path
+
+log = logging.getLogger(__name__)
 
 
 def file_sha256(path: str | os.PathLike, chunk: int = 1 << 22) -> str:
@@ -40,6 +43,11 @@ def read_record(path: str | os.PathLike) -> dict | None:
         return None
     try:
         obj = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError) as e:  # truncated, emptied, not UTF-8 or not JSON
+        log.warning("%s: unreadable record (%s: %s); treated as missing, what it describes is rebuilt and the "
+                    "record replaced", p, type(e).__name__, e)
         return None
-    return obj if isinstance(obj, dict) else None
+    if not isinstance(obj, dict):
+        log.warning("%s: not a JSON object; treated as missing, what it describes is rebuilt and the record replaced", p)
+        return None
+    return obj

@@ -233,3 +233,19 @@ def test_cut_pairs_render_as_padded_one_camera_scenes(mode, people):
     for a, b in zip(pairs, padded):
         assert a.shape == b.shape
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "empty", "bit_flipped"])
+def test_a_damaged_hierarchy_cache_is_a_miss_rebuilt_and_named(tmp_path, caplog, damage, damage_file):
+    import logging
+
+    path = tmp_path / "3dgs.ply"
+    random_gaussians(300).save(path)
+    first = load_splat(path, lod_px=1.0)
+    cache = tmp_path / "3dgs.lod.npz"
+    damage_file(cache, damage, bit_at=100)
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.render.hierarchy"):
+        again = load_splat(path, lod_px=1.0)
+    torch.testing.assert_close(again.nodes.means, first.nodes.means)
+    assert f"{cache}: unreadable hierarchy cache" in caplog.text
+    assert hier.load_nodes(cache, source_sha256=file_sha256(path)) is not None  # replaced by a sound one

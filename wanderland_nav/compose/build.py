@@ -16,7 +16,7 @@ from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.render import Gaussians
 from wanderland_nav.render.lod import load_splat
-from wanderland_nav.rl.checkpoint import load_checkpoint
+from wanderland_nav.rl.checkpoint import fit_policy_weights, load_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
 from wanderland_nav.scene.checks import check_splat_visible
 from wanderland_nav import viz
@@ -115,6 +115,6 @@ def policy_from_checkpoint(path, device: str = "cpu"):
     if "name" not in pol:
         raise ValueError(f"{path}: checkpoint config has no policy.name; cannot rebuild the policy")
     policy = make_policy_from_config(pol, device)
-    policy.load_state_dict(ckpt["policy"])
+    fit_policy_weights(policy, ckpt["policy"], path)
     policy.pretrained_from = str(path)
     return policy.eval(), ckpt
