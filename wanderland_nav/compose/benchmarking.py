@@ -4,7 +4,10 @@ servers) evaluated on every task of a scene or scene set, the same routes for al
 Each (policy, task) evaluation is stored as `<out>/runs/<task>/<policy>.json` (a scene set: one
 `<out>/runs/<task>/<policy>/<scene_id>.json` per scene) with a key over everything it depends on (the
 policy's spec, the task, the env config, the scene and episodes files, split, seed, episode count); a rerun
-reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy and scene.
+reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy and scene. A served
+policy (`url`) is contacted only when one of its evaluations must run (its declaration is stored with each),
+and an evaluation during which its server could not be reached is not stored: it is listed as not finished,
+and the next run does it again.
 Beside `table.txt` and `results.csv` it draws `table.png`: SR with its interval per task, indoor / outdoor,
 one bar per policy (the paper's Table 4 as a chart).
 """
@@ -15,7 +18,6 @@ import csv
 import dataclasses
 import difflib
 import io
-import json
 import logging
 import time
 from dataclasses import dataclass
@@ -26,7 +28,7 @@ from omegaconf import OmegaConf
 
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-from wanderland_nav.cache import file_sha256, json_digest
+from wanderland_nav.cache import file_sha256, json_digest, read_record
 from wanderland_nav.compose.build import (blind_env_config, env_factory, load_navmesh, policy_from_checkpoint,
                                           scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.comparison import stored_env_config
@@ -65,6 +67,14 @@ class Entry:
     image_size: Any = None
     trained_goal_input: str = ""  # checkpoint: the point-goal input it was trained with
     content: str = ""            # checkpoint: the file's digest (part of each evaluation's key)
+    connect: Any = None          # url: () -> actor, called when one of its evaluations must run (reads None till then)
+
+    def ensure_actor(self):
+        """The actor, a served policy contacted now if it was not yet (its declaration read from `/info`)."""
+        if self.actor is None and self.connect is not None:
+            self.actor = self.connect()
+            self.reads = tuple(self.actor.in_keys)
+        return self.actor
 
 
 def policy_entries(c: BenchmarkConfig) -> list[Entry]:
@@ -101,11 +111,17 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
             out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), env_cfg, size,
                              str(conf.get("goal_input") or "goal"), file_sha256(spec["checkpoint"])))
             continue
-        inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else RemotePolicy(spec["url"], timeout)
-        actor = ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
-                              max_consecutive_failures=int(spec.get("max_consecutive_failures",
-                                                                    c.max_consecutive_failures)))
-        out.append(Entry(name, spec, src, tuple(actor.in_keys), actor))
+        def connect(spec=spec, src=src, name=name, timeout=timeout):
+            inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else \
+                RemotePolicy(spec["url"], timeout)
+            return ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
+                                 max_consecutive_failures=int(spec.get("max_consecutive_failures",
+                                                                       c.max_consecutive_failures)))
+        if src == "url":  # contacted only when one of its evaluations must run (a rerun with all stored needs no server)
+            out.append(Entry(name, spec, src, None, connect=connect))
+        else:
+            actor = connect()
+            out.append(Entry(name, spec, src, tuple(actor.in_keys), actor))
     return out
 
 
@@ -145,7 +161,8 @@ def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, nav
         seconds = time.perf_counter() - t0
     finally:
         env.close()
-    return {"records": _records_with_failures(res.records, entry.actor), "seconds": seconds}
+    return {"records": _records_with_failures(res.records, entry.actor), "seconds": seconds,
+            "transport_error": getattr(entry.actor, "transport_error", None)}
 
 
 def run_key(entry: Entry, task, c: BenchmarkConfig, scene_part: dict) -> str:
@@ -241,7 +258,25 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     if baseline not in {e.name for e in entries}:
         raise ValueError(f"benchmark baseline={baseline!r}: not among the policies {[e.name for e in entries]}")
     header, scenes = benchmark_scenes(c)
+    parts = {sid: scene_identity(scene.root, episodes) for sid, scene, episodes in scenes}
+
+    def stored_run(entry, task, sid) -> tuple[Path, str, dict]:
+        """(file, key, what it holds when its key matches, else {}): one stored evaluation per task, policy, scene."""
+        path = out / "runs" / task.label / (f"{entry.name}.json" if not c.scene.set else f"{entry.name}/{sid}.json")
+        key = run_key(entry, task, c, parts[sid])
+        stored = read_record(path) or {}  # unreadable (a killed copy, a full disk): run again, and said so
+        return path, key, stored if stored.get("key") == key else {}
+
+    for entry in entries:  # a served policy's declaration from its stored evaluations, when they hold it
+        if entry.reads is None:
+            known = [r["reads"] for task in tasks for sid in parts
+                     if isinstance((r := stored_run(entry, task, sid)[2]).get("reads"), list)]
+            if known:
+                entry.reads = tuple(known[0])
+            else:
+                entry.ensure_actor()
     results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
+    unfinished: dict[tuple[str, str], str] = {}  # (task, policy) -> why an evaluation of it is not a result
     for task in tasks:
         for entry in entries:
             bad = hidden_reads(task, entry.reads)
@@ -255,19 +290,22 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
                                f"evaluated with goal_input={task.goal_input} (pointgoal_input)")
             results[(task.label, entry.name)] = []
     for sid, scene, episodes in scenes:  # scene by scene: one scene's navmesh and splat loaded at a time
-        scene_part, navmesh = scene_identity(scene.root, episodes), load_navmesh(scene)
+        navmesh = load_navmesh(scene)
         for task in tasks:
             for entry in entries:
                 if (task.label, entry.name) not in results:
                     continue
                 # one file per evaluation: an interrupted benchmark resumes per task, policy and scene
-                name = f"{entry.name}.json" if not c.scene.set else f"{entry.name}/{sid}.json"
-                path = out / "runs" / task.label / name
-                key = run_key(entry, task, c, scene_part)
-                stored = json.loads(path.read_text()) if path.is_file() else {}
-                if stored.get("key") != key:
-                    stored = {"key": key, "policy": entry.spec, "task": task.label, "scene": sid,
-                              **_evaluate(entry, task, c, scene, episodes, navmesh)}
+                path, key, stored = stored_run(entry, task, sid)
+                if not stored:
+                    entry.ensure_actor()
+                    fresh = _evaluate(entry, task, c, scene, episodes, navmesh)
+                    cause = fresh.pop("transport_error")
+                    if cause:  # the connection failed, not the policy: not a result, never stored as one
+                        unfinished.setdefault((task.label, entry.name), f"{sid}: {cause}")
+                        continue
+                    stored = {"key": key, "policy": entry.spec, "reads": list(entry.reads), "task": task.label,
+                              "scene": sid, **fresh}
                     atomic_write_json(path, stored)
                 else:
                     log.info("%s/%s on %s: stored evaluation reused (%s)", task.label, entry.name, sid, path)
@@ -277,14 +315,21 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
         close = getattr(e.actor, "close", None)
         if close is not None:
             close()
+    for (task_label, name), cause in unfinished.items():  # a row missing a scene's evaluation would be a subset
+        results.pop((task_label, name), None)
+        skipped.append(f"{task_label}/{name}: not finished, nothing of it stored ({cause}); rerun with the policy's "
+                       "server reachable to finish it (the stored evaluations are reused)")
     rows = grouped_rows(results, per_scene=len(scenes) > 1)
     pairs = [(f"{t}/{n}", f"{t}/{baseline}") for (t, n) in results if n != baseline and (t, baseline) in results]
     pooled = "" if len(scenes) == 1 else "; rows without a scene pool every scene's episodes"
     table = "\n".join([f"{header}: split {c.split}, success: {SUCCESS_RULE}{pooled}",
-                       comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs),
+                       comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs) if rows else
+                       "no evaluation finished",
                        *failure_lines(results), *skipped])
     atomic_write_text(out / "table.txt", table + "\n")
     atomic_write_text(out / "results.csv", results_csv(rows))
-    write_study_chart(out / "table.png", sr_chart(rows), title=header, value_label="SR")
+    if rows:
+        write_study_chart(out / "table.png", sr_chart(rows), title=header, value_label="SR")
     atomic_write_json(out / "timing.json", seconds)
-    return {"table": table, "results": results, "rows": rows, "skipped": skipped, "seconds": seconds}
+    return {"table": table, "results": results, "rows": rows, "skipped": skipped, "seconds": seconds,
+            "unfinished": unfinished}

@@ -29,7 +29,13 @@ MAX_ANSWER_BYTES = 16 << 20  # waypoints [B, K, 2] float32: 64 kB for 1024 agent
 
 
 class RemotePolicyError(RuntimeError):
-    """The remote policy is unreachable, too slow, or answered something unusable."""
+    """The remote policy is unreachable, too slow, or answered something unusable. `transport`: the server could
+    not be reached or dropped the connection (it died, or the network did), which says nothing about the policy:
+    an evaluation with such a failure is not a result (`ExternalActor.transport_error`)."""
+
+    def __init__(self, message: str, *, transport: bool = False):
+        super().__init__(message)
+        self.transport = transport
 
 
 class RemotePolicy:
@@ -77,10 +83,11 @@ class RemotePolicy:
         except ConnectionRefusedError:
             self.close()
             raise RemotePolicyError(f"{where}: connection refused: no policy server is running there (start one with "
-                                    "python -m wanderland_nav.serve_policy target=pkg.mod:Class port=<port>)") from None
+                                    "python -m wanderland_nav.serve_policy target=pkg.mod:Class port=<port>)",
+                                    transport=True) from None
         except (OSError, http.client.HTTPException) as e:
             self.close()
-            raise RemotePolicyError(f"{where}: {type(e).__name__}: {e}") from None
+            raise RemotePolicyError(f"{where}: {type(e).__name__}: {e}", transport=True) from None
 
     def _json(self, method: str, path: str):
         status, _, data = self._request(method, path)
