@@ -29,8 +29,8 @@ from omegaconf import OmegaConf
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.cache import file_sha256, json_digest, read_record
-from wanderland_nav.compose.build import (blind_env_config, env_factory, load_navmesh, policy_from_checkpoint,
-                                          scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.build import (blind_env_config, check_env_carries, env_factory, load_navmesh,
+                                          policy_from_checkpoint, scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.comparison import stored_env_config
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
@@ -131,18 +131,24 @@ def _records_with_failures(records: list[dict], actor) -> list[dict]:
     return [{**r, "policy_error": failures.get(int(r["episode_index"]), "")} for r in records]
 
 
-def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, navmesh) -> dict:
-    """One (policy, task) evaluation -> `{"records", "seconds"}`."""
-    split = c.split if c.split is not None else c.env.split
+def entry_env_config(entry: Entry, task, c: BenchmarkConfig):
+    """The env config one (policy, task) evaluation runs in, refused when it would not carry what the policy reads."""
     if entry.source == "reference":  # reads nothing: the camera stays off (its rows are the same in every task)
-        env_cfg = blind_env_config(c.env)
-    else:
-        base = entry.env_config if entry.env_config is not None else c.env
-        env_cfg = shaped_env_config(base, entry.actor.policy if entry.source == "checkpoint" else entry.actor,
-                                    entry.image_size)
-        if not set(entry.reads) & IMAGE_KEYS:  # a policy that never looks gets no rendering
-            env_cfg = blind_env_config(env_cfg)
-        env_cfg = task_env_config(task, env_cfg)
+        return blind_env_config(c.env)
+    base = entry.env_config if entry.env_config is not None else c.env
+    env_cfg = shaped_env_config(base, entry.actor.policy if entry.source == "checkpoint" else entry.actor,
+                                entry.image_size)
+    if not set(entry.reads) & IMAGE_KEYS:  # a policy that never looks gets no rendering
+        env_cfg = blind_env_config(env_cfg)
+    env_cfg = task_env_config(task, env_cfg)
+    check_env_carries(entry.reads, env_cfg, f"benchmark {task.label}/{entry.name}")
+    return env_cfg
+
+
+def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, navmesh) -> dict:
+    """One (policy, task) evaluation -> `{"records", "seconds", "transport_error"}`."""
+    split = c.split if c.split is not None else c.env.split
+    env_cfg = entry_env_config(entry, task, c)
     g = scene_gaussians(scene, c.lod_px, needed=env_cfg.camera.enabled)
     env = with_goal_input(env_factory(scene, episodes, env_cfg, split=split, batch_size=c.batch_size, seed=c.seed,
                                       device=c.device, navmesh=navmesh, gaussians=g)(),
@@ -288,6 +294,8 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
                     and {keys.GOAL_VECTOR, keys.GOAL_POSE} & set(entry.reads):
                 skipped.append(f"{task.label}/{entry.name}: trained with goal_input={entry.trained_goal_input}, "
                                f"evaluated with goal_input={task.goal_input} (pointgoal_input)")
+            if entry.actor is not None or entry.source == "reference":
+                entry_env_config(entry, task, c)  # a key the env would not carry: refused before any evaluation
             results[(task.label, entry.name)] = []
     for sid, scene, episodes in scenes:  # scene by scene: one scene's navmesh and splat loaded at a time
         navmesh = load_navmesh(scene)

@@ -32,7 +32,27 @@ def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfi
     kinematics = dataclasses.replace(env.kinematics, num_waypoints=need.num_waypoints, action_mode=need.action_mode)
     reads = set(getattr(policy, "in_keys", ()))  # a policy that reads the goal view gets the key on point-goal tasks too
     goal_view = True if keys.GOAL_IMAGE in reads else env.observe_goal_image
+    camera = dataclasses.replace(camera, depth=camera.depth or keys.DEPTH in reads)  # depth rendered for who reads it
     return dataclasses.replace(env, camera=camera, kinematics=kinematics, observe_goal_image=goal_view)
+
+
+#: the env settings that must be on for an observation key to be carried
+KEY_SETTINGS = {keys.RGB: ("camera.enabled",), keys.DEPTH: ("camera.enabled", "camera.depth"),
+                keys.GOAL_IMAGE: ("observe_goal_image",), keys.HAS_GOAL_IMAGE: ("observe_goal_image",),
+                keys.INSTRUCTION_TOKENS: ("observe_instruction",)}
+
+
+def check_env_carries(reads, env: NavEnvConfig, who: str) -> None:
+    """Refuse, naming the key and the setting, a policy that reads a key `env` would not carry (before any
+    episode: the alternative is a `KeyError` at its first step, mid-benchmark)."""
+    for key in reads:
+        for setting in KEY_SETTINGS.get(key, ()):
+            value = env
+            for part in setting.split("."):
+                value = getattr(value, part)
+            if value is False:
+                raise ValueError(f"{who} reads {key!r}, which the env would not carry: env.{setting}=false "
+                                 f"(set env.{setting}=true, or give the policy an env that observes it)")
 
 
 def blind_env_config(env: NavEnvConfig) -> NavEnvConfig:
