@@ -169,7 +169,7 @@ def test_read_only_scene_keeps_its_hierarchy_in_the_user_cache(tmp_path, monkeyp
     real_access = os.access  # root may write anywhere: the folder is made read-only for the loader alone
     monkeypatch.setattr("wanderland_nav.render.lod.os.access",
                         lambda p, mode: False if os.path.samefile(p, scene) else real_access(p, mode))
-    monkeypatch.setenv("WANDERLAND_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("WANDERLAND_NAV_CACHE", str(tmp_path / "cache"))  # the one cache variable
     load_splat(scene / "3dgs.ply", lod_px=1.0)
     assert not (scene / "3dgs.lod.npz").exists()
     assert len(list((tmp_path / "cache" / "lod").glob("*.lod.npz"))) == 1
