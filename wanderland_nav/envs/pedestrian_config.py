@@ -86,7 +86,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "view_angle_deg": (0, 360), "out_of_view_weight": (0, 1), "body_stiffness": (0, 1e7), "friction": (0, 1e7),
     "dt": (0, 0.1), "waypoints": (2, 100_000), "arrive_distance": (0, 100), "pause_probability": (0, 1),
     "pause_min": (0, 3600), "pause_max": (0, 3600), "respawn_after": (0, 3600), "spawn_clearance": (0, 1000),
-    "robot_radius": (0, 5), "personal_space": (0, 10), "personal_space_penalty": (-1000, 1000),
+    "robot_radius": (0, 5), "personal_space": (0, 100), "personal_space_penalty": (-1000, 1000),
     "height_min": (0, 3), "height_max": (0, 3),
 }
 OPEN_BELOW = {"speed_mean", "speed_min", "speed_max", "radius", "mass", "relaxation_time", "social_range",
