@@ -74,3 +74,18 @@ def test_non_finite_gaussians_in_memory_count_as_invisible(scene_copy):
     g = Gaussians.load(scene.gaussians_path)
     v = splat_visibility(dataclasses.replace(g, means=torch.full_like(g.means, math.nan)), scene.cameras)
     assert v["visible"] == 0 and v["nonfinite"] == v["sampled"]
+
+
+def test_goal_views_of_a_splat_nobody_can_see_are_refused_before_any_is_rendered(prepared_demo_scene, tmp_path):
+    from wanderland_nav.compose import compose_config
+    from wanderland_nav.make_episodes import run
+
+    scene = tmp_path / "scene"
+    shutil.copytree(prepared_demo_scene, scene)
+    g = Gaussians.load(scene / "3dgs.ply")
+    _broken(g, "opacity_-inf").save(scene / "3dgs.ply")
+    cfg = compose_config("make_episodes", [f"scenes=[{scene}]", "num_episodes=2", "generator.goal_images=true",
+                                           "topdown=false", "progress=false", "navigation.prepare=false"])
+    with pytest.raises(BlankSplatError, match="the camera would render blank frames"):
+        run(cfg)
+    assert not list(scene.glob("goal_images*"))

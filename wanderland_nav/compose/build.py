@@ -71,8 +71,14 @@ def scene_gaussians(scene, lod_px: float | None, *, needed: bool = True):
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
                                 "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
                                 "turn the camera off (env.camera.enabled=false)")
-    check_splat_visible(Gaussians.load(path), scene.cameras, path)  # never a silently blank camera
+    check_scene_splat(scene)
     return load_splat(path, lod_px)
+
+
+def check_scene_splat(scene) -> None:
+    """Refuse the scene's `3dgs.ply` when its capture cameras would see (almost) none of it
+    (`scene.checks.check_splat_visible`): a camera or goal view over it would be silently blank."""
+    check_splat_visible(Gaussians.load(scene.gaussians_path), scene.cameras, scene.gaussians_path)
 
 
 def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_size: int, seed: int, device: str,
