@@ -77,3 +77,17 @@ def test_env_settings_are_finite(key):
     setattr(getattr(cfg, group), name, math.inf)
     with pytest.raises(ValueError, match=rf"NavEnvConfig\.{key}: invalid value inf \(not a finite number\)"):
         cfg.validate()
+
+
+@pytest.mark.parametrize("primary,override", [("prepare", "navigation.collision.voxel_size=inf"),
+                                              ("make_episodes", "generator.step_size=nan"),
+                                              ("make_episodes", "generator.sampler.max_geodesic=inf"),
+                                              ("train", "algo.bc.lr=nan"), ("train", "algo.ppo.gamma=inf"),
+                                              ("prepare", "navigation.collision.height_band=[-4,inf]")])
+def test_every_number_of_a_composed_config_is_finite(primary, override):
+    """Library settings without a range check of their own (collision, generator, BC, PPO) included."""
+    from wanderland_nav.compose.schema import SCHEMAS, typed_config
+
+    key = override.split("=")[0]
+    with pytest.raises(ValueError, match=rf"{key}=.*: must be a finite number"):
+        typed_config(compose_config(primary, [override]), SCHEMAS[primary])
