@@ -78,7 +78,8 @@ class Entry:
 
 
 def policy_entries(c: BenchmarkConfig) -> list[Entry]:
-    """The configured policies, built (a remote server is contacted, a target imported, a checkpoint loaded)."""
+    """The configured policies, built (a target imported, a checkpoint loaded); a served one (`url`) is contacted
+    later, when one of its evaluations must run (`Entry.ensure_actor`)."""
     if not c.policies:
         raise ValueError("benchmark: no policies; e.g. policies='[{name: expert, reference: expert}]'")
     out, seen = [], set()
