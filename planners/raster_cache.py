@@ -18,7 +18,10 @@ goal's sources are computed once per navmesh content and reused:
 from __future__ import annotations
 
 import hashlib
+import logging
 import warnings
+import zipfile
+import zlib
 from collections import OrderedDict
 from pathlib import Path
 
@@ -30,6 +33,10 @@ from planners.raster_build import VisiblePairs
 RASTER_VERSION = 3  # bump when the sources a build produces change (v1: per-goal exact queries, no cache; v2: batched;
 # v3: tangency margin `visibility.TANGENT_SLACK`)
 MEMORY_BUDGET = 512 << 20  # bytes of cached rows + pairs over all navmeshes in this process
+
+log = logging.getLogger(__name__)
+#: what reading a damaged `.npy` / `.npz` raises (a truncated zip, a failed CRC, a bad header, a cut-off array)
+UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error)
 
 _MEMORY: "OrderedDict[str, dict]" = OrderedDict()  # navmesh key -> {"pairs": VisiblePairs|None, "rows": {goal: row}}
 
@@ -101,13 +108,17 @@ class RasterCache:
     def _read_pairs(self) -> VisiblePairs | None:
         if self.folder is None or not (self.folder / "pairs.npz").is_file():
             return None
+        path = self.folder / "pairs.npz"
         try:
-            with np.load(self.folder / "pairs.npz", allow_pickle=False) as z:
+            with np.load(path, allow_pickle=False) as z:
                 pairs = VisiblePairs(**{k: z[k] for k in ("start", "corner", "dist", "island")})
-        except (OSError, ValueError, KeyError, EOFError):
+        except UNREADABLE as e:  # truncated, empty, bit-flipped (a member's CRC) or foreign
+            log.warning("%s: unreadable raster cache (%s: %s); rebuilding it", path, type(e).__name__, e)
             return None
         ok = (pairs.start.shape == (self.n_samples + 1,) and pairs.island.shape == (self.n_samples,)
               and pairs.corner.shape == pairs.dist.shape == (int(pairs.start[-1]),))
+        if not ok:
+            log.warning("%s: raster cache of other sizes than this navmesh's; rebuilding it", path)
         return pairs if ok else None
 
     @staticmethod
@@ -116,8 +127,9 @@ class RasterCache:
             return None
         try:
             return np.load(path, allow_pickle=False)
-        except (OSError, ValueError, EOFError):
-            return None  # truncated or foreign: rebuilt and overwritten
+        except UNREADABLE as e:  # truncated or foreign: rebuilt and overwritten
+            log.warning("%s: unreadable raster cache (%s: %s); rebuilding it", path, type(e).__name__, e)
+            return None
 
     def _write(self, name: str, save) -> None:
         if self.folder is None:

@@ -21,6 +21,27 @@ if str(REPO) not in sys.path:
 SHARED_DATA = Path(os.environ.get("WANDERLAND_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
+def _damage_file(path: Path, how: str, bit_at: int = 200) -> bytes:
+    """Damage a cache file as disks and killed copies do: "truncated" (half), "empty", or "bit_flipped" (one bit
+    at byte `bit_at`, inside an `.npz`'s first member). -> its good bytes."""
+    good = path.read_bytes()
+    if how == "truncated":
+        path.write_bytes(good[: len(good) // 2])
+    elif how == "empty":
+        path.write_bytes(b"")
+    else:
+        flipped = bytearray(good)
+        flipped[bit_at] ^= 0x10
+        path.write_bytes(bytes(flipped))
+    return good
+
+
+@pytest.fixture()
+def damage_file():
+    """`damage_file(path, how, bit_at=200)`: see `_damage_file`."""
+    return _damage_file
+
+
 @pytest.fixture(autouse=True)
 def _deterministic_torch():
     torch.manual_seed(0)

@@ -37,7 +37,8 @@ def run(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="benchmark")
 def hydra_main(cfg: DictConfig) -> None:
-    run(cfg)
+    if run(cfg)["unfinished"]:  # an evaluation whose policy server could not be reached: exit status 1
+        sys.exit(1)
 
 
 def main() -> None:

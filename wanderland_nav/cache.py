@@ -1,4 +1,5 @@
-"""Hash-and-skip caching: a digest of everything that determines an artefact, stored beside it.
+"""Hash-and-skip caching: a digest of everything that determines an artefact, stored beside it; and the one
+user cache folder (`cache_root`) every cache that cannot live beside its source uses.
 
 Scene preparation (collision mesh, navmesh sidecars), the demo scene (its marker file) and episode
 generation (the episodes file's `generator` record) each rebuild only when the digest of their inputs
@@ -11,8 +12,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from pathlib import Path
+
+log = logging.getLogger(__name__)
 
 
 def file_sha256(path: str | os.PathLike, chunk: int = 1 << 22) -> str:
@@ -40,6 +44,33 @@ def read_record(path: str | os.PathLike) -> dict | None:
         return None
     try:
         obj = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError) as e:  # truncated, emptied, not UTF-8 or not JSON
+        log.warning("%s: unreadable record (%s: %s); treated as missing, what it describes is rebuilt and the "
+                    "record replaced", p, type(e).__name__, e)
         return None
-    return obj if isinstance(obj, dict) else None
+    if not isinstance(obj, dict):
+        log.warning("%s: not a JSON object; treated as missing, what it describes is rebuilt and the record replaced", p)
+        return None
+    return obj
+
+
+CACHE_ENV = "WANDERLAND_NAV_CACHE"
+OLD_CACHE_ENV = "WANDERLAND_CACHE"  # the splat hierarchy's variable once; still read, with a warning
+
+
+def cache_root() -> Path:
+    """`$WANDERLAND_NAV_CACHE`, else `$XDG_CACHE_HOME/wanderland_nav`, else `~/.cache/wanderland_nav`: the one
+    user cache folder (products of read-only scenes, splat hierarchies of read-only folders).
+
+    `$WANDERLAND_CACHE` (the hierarchy cache's variable once) is still read when `$WANDERLAND_NAV_CACHE` is unset,
+    with a deprecation warning; set beside it with another value, it is ignored, and that is said too."""
+    new, old = os.environ.get(CACHE_ENV), os.environ.get(OLD_CACHE_ENV)
+    if old and not new:
+        log.warning("$%s is deprecated: set $%s instead (using %s for every cache)", OLD_CACHE_ENV, CACHE_ENV, old)
+        new = old
+    elif old and Path(old).expanduser() != Path(new).expanduser():
+        log.warning("$%s=%s is ignored: $%s=%s is the cache folder", OLD_CACHE_ENV, old, CACHE_ENV, new)
+    if new:
+        return Path(new).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "wanderland_nav"
+

@@ -138,9 +138,11 @@ def _read_manifest(path: Path) -> dict:
         return {"format": MANIFEST_FORMAT, "done": {}, "failed": {}}
     try:
         m = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: done-manifest is not JSON ({e}); delete it to start over") from e
-    if m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("done"), dict):
+    except (OSError, ValueError) as e:  # truncated or emptied: every scene is checked again (each skips when up to date)
+        log.warning("%s: unreadable done-manifest (%s); every scene is checked again and the manifest replaced",
+                    path, e)
+        return {"format": MANIFEST_FORMAT, "done": {}, "failed": {}}
+    if not isinstance(m, dict) or m.get("format") != MANIFEST_FORMAT or not isinstance(m.get("done"), dict):
         raise ValueError(f"{path}: field 'format' must be {MANIFEST_FORMAT} with a 'done' object; "
                          "delete it to start over")
     return m

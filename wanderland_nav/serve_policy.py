@@ -41,7 +41,8 @@ def make_server(cfg: DictConfig) -> PolicyServer | NavDPServer:
         policy = NavPolicyAsExternal(policy_from_checkpoint(c.checkpoint, c.device)[0])
     else:
         policy = NavPolicyAsExternal(released_policy({"model": c.model, "weights": c.weights}, c.device)[0])
-    return (NavDPServer if c.protocol == "navdp" else PolicyServer)(policy, c.host, c.port)
+    server = NavDPServer if c.protocol == "navdp" else PolicyServer
+    return server(policy, c.host, c.port, max_body_bytes=c.max_body_mb << 20, allowed_hosts=tuple(c.allowed_hosts))
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="serve_policy")

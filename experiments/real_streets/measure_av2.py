@@ -1,6 +1,7 @@
 """Navmesh of the Argoverse 2 street vs the map's ground truth: road coverage, height error, obstacles.
 
     PYTHONPATH=$PWD python experiments/real_streets/measure_av2.py [--scene /tmp/av2] [--set ground_fill=false] [--cell-height 0.05] [--png out.png]
+    PYTHONPATH=$PWD python experiments/real_streets/measure_av2.py --navigation default [--set navigation.navmesh.agent_max_climb=0.2]
 
 Copies `../shared/data/av2/scene` to `--scene` (if missing), runs `prepare` on it (forced), then
 compares `navmesh.npz` with `ground.npz` (the map's ground-height raster, 0.3 m) and `drivable.json`
@@ -75,13 +76,26 @@ def plot(png: Path, nm, polys, poses, obst, road_xy, covered) -> None:
     plt.close(fig)
 
 
+def navigation_group(name: str, overrides=()):
+    """The project's composed `navigation=<name>` group (collision and navmesh settings), as every entry point
+    composes it."""
+    from wanderland_nav.compose import compose_config
+    from wanderland_nav.compose.schema import PrepareConfig, typed_config
+
+    return typed_config(compose_config("prepare", [f"navigation={name}", *overrides]), PrepareConfig).navigation
+
+
 def measure(scene_dir: Path, settings: CollisionSettings, cell_height: float, png: Path | None = None,
-            max_climb: float | None = None) -> dict:
+            max_climb: float | None = None, navmesh=None) -> dict:
+    """`navmesh`: a composed group's `NavMeshSettings` (then `cell_height` / `max_climb` are not used)."""
     from planners import NavMesh, NavMeshSettings
 
-    scene = prepare_scene(scene_dir, force=True, collision=settings,
-                          navmesh=NavMeshSettings(up_axis="+z", cell_height=cell_height,
-                                                   **({} if max_climb is None else {"agent_max_climb": max_climb})))
+    if navmesh is None:
+        navmesh = NavMeshSettings(up_axis="+z", cell_height=cell_height,
+                                  **({} if max_climb is None else {"agent_max_climb": max_climb}))
+    else:
+        navmesh = dataclasses.replace(navmesh, up_axis="+z")
+    scene = prepare_scene(scene_dir, force=True, collision=settings, navmesh=navmesh)
     nm = NavMesh.load(scene.navmesh_path)
     ground = dict(np.load(DATA / "ground.npz"))
     polys = [np.asarray(p["xyz"])[:, :2] for p in json.loads((DATA / "drivable.json").read_text())["polygons"]]
@@ -119,7 +133,9 @@ def measure(scene_dir: Path, settings: CollisionSettings, cell_height: float, pn
         plot(png, nm, polys, poses, obst, road_xyz[:, :2], covered)
     cell = 0.1 * 0.1
     return {
-        "ground_fill": settings.ground_fill, "cell_height": cell_height, "navmesh_area_m2": nm.area,
+        "ground_fill": settings.ground_fill, "cell_height": navmesh.cell_height, "navmesh_area_m2": nm.area,
+        "agent": {k: getattr(navmesh, k) for k in ("agent_radius", "agent_height", "agent_max_climb", "agent_max_slope")},
+        "islands": len(nm.islands), "largest_island_m2": max((i.area for i in nm.islands), default=0.0),
         "filled_area_m2": scene.meta["prepare"]["collision_mesh"].get("ground_fill", {}).get("filled_area_m2", 0.0),
         "road_m2": road.sum() * cell, "road_covered": float(covered.mean()),
         "seen_road_m2": seen.sum() * cell, "seen_road_covered": float(covered[seen].mean()),
@@ -139,15 +155,31 @@ def main(argv=None) -> None:
     ap.add_argument("--cell-height", type=float, default=0.2, help="navmesh cell height (m): its floors round up")
     ap.add_argument("--max-climb", type=float, default=None, help="navmesh agent_max_climb (m); default: the project's")
     ap.add_argument("--png", type=Path, default=None, help="write a top-down figure here")
+    ap.add_argument("--navigation", default=None, metavar="NAME",
+                    help="the project's navigation=NAME group (default | street | recast | habitat) for both the "
+                         "collision and the navmesh settings; then --set takes navigation.* overrides")
     a = ap.parse_args(argv)
+    if a.navigation is not None:
+        if not (a.scene / "lidar").is_dir():
+            shutil.copytree(DATA / "scene", a.scene)
+        group = navigation_group(a.navigation, a.set)
+        m = measure(a.scene, group.collision, cell_height=group.navmesh.cell_height, png=a.png, navmesh=group.navmesh)
+        report(m, f"navigation={a.navigation} {' '.join(a.set)}".strip())
+        return
+
     if not (a.scene / "lidar").is_dir():
         shutil.copytree(DATA / "scene", a.scene)
     fields = {f.name: f.type for f in dataclasses.fields(CollisionSettings)}
     kw = {k: (v.lower() == "true") if fields[k] in (bool, "bool") else float(v)
           for k, v in (kv.split("=", 1) for kv in a.set)}
     m = measure(a.scene, CollisionSettings(**kw), cell_height=a.cell_height, png=a.png, max_climb=a.max_climb)
-    print(f"av2 street, ground_fill={m['ground_fill']}, navmesh cell_height {m['cell_height']} m: navmesh {m['navmesh_area_m2']:.0f} m2 "
-          f"(ground infill added {m['filled_area_m2']:.0f} m2)")
+    report(m, f"ground_fill={m['ground_fill']}")
+
+
+def report(m: dict, what: str) -> None:
+    print(f"av2 street, {what}, navmesh cell_height {m['cell_height']} m, agent {m['agent']}: navmesh "
+          f"{m['navmesh_area_m2']:.0f} m2 in {m['islands']} islands (largest {m['largest_island_m2']:.0f} m2; ground "
+          f"infill added {m['filled_area_m2']:.0f} m2)")
     print(f"  road in the 15 m region: {m['road_m2']:.0f} m2, on the navmesh {100 * m['road_covered']:.1f} %")
     print(f"  seen road (within 1 m of a ground return): {m['seen_road_m2']:.0f} m2, "
           f"on the navmesh {100 * m['seen_road_covered']:.1f} %")

@@ -132,14 +132,15 @@ def make_episode(i, start_xy, goal_xy, yaw=0.0, radius=0.5, text="walk to the go
     )
 
 
-def make_episodes():
-    """Four episodes in the room: straight, diagonal, behind the start, and one across the halves."""
-    return [
-        make_episode(0, (1, 1), (4, 1), yaw=0.0),
-        make_episode(1, (2, 2), (4, 5), yaw=0.5),
-        make_episode(2, (8, 3), (6, 3), yaw=0.0, text="turn around"),
-        make_episode(3, (1, 5), (9, 1), yaw=-0.3),
-    ]
+def make_episodes(copies: int = 1):
+    """Four episodes in the room: straight, diagonal, behind the start, and one across the halves (`copies` times,
+    ids 0 .. 4 * copies - 1: an evaluation counts each episode once, so more need more of them)."""
+    return [make_episode(4 * k + i, *route[:2], **route[2]) for k in range(copies) for i, route in enumerate([
+        ((1, 1), (4, 1), dict(yaw=0.0)),
+        ((2, 2), (4, 5), dict(yaw=0.5)),
+        ((8, 3), (6, 3), dict(yaw=0.0, text="turn around")),
+        ((1, 5), (9, 1), dict(yaw=-0.3)),
+    ])]
 
 
 def make_env(B=2, config=None, episodes=None, seed=0, goal_images=None, navmesh=None, **kw):

@@ -172,7 +172,7 @@ def test_expert_succeeds_and_random_does_not(mode):
     c = small_config(action_mode=mode)
     c.termination.max_steps = 60
     c.episode_order = "iterate"
-    env = make_env(B=3, config=c)
+    env = make_env(B=3, config=c, episodes=make_episodes(2))
     res = run_evaluation(env, ExpertPolicy(env), num_episodes=8)
     o = res.summary["overall"]
     assert o["episodes"] == 8 and o["SR"] == 1.0 and o["SPL"] >= 0.95 and o["IR"] == 0.0
@@ -187,7 +187,7 @@ def test_evaluation_does_not_depend_on_batch_size():
     c.episode_order = "iterate"
     recs, rendered = [], []
     for B in (1, 4):
-        env = make_env(B=B, config=c)
+        env = make_env(B=B, config=c, episodes=make_episodes(2))
         res = run_evaluation(env, ExpertPolicy(env), num_episodes=5)
         recs.append(sorted((r["serial"], r["steps"], round(r["path_length"], 4)) for r in res.records))
         rendered.append(sum(env.camera.renderer.calls))
@@ -341,7 +341,7 @@ def test_blank_camera_evaluation_skips_rendering_and_keeps_every_record():
     torch.manual_seed(0)
     policy = make_policy("cnn", image_size=(16, 16), context=3, feature_dim=32)
     blind = PolicyActor(BlankCamera(policy))
-    env = make_env(B=3, config=small_config())
+    env = make_env(B=3, config=small_config(), episodes=make_episodes(2))
     rendered = run_evaluation(env, blind, num_episodes=6).records
     calls = len(env.camera.renderer.calls)
     assert calls > 0

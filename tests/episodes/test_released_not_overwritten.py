@@ -74,19 +74,53 @@ def test_make_episodes_entry_point_force_reaches_the_library(prepared_demo_scene
     assert s.out == str(out) and "generator" in json.loads(out.read_text())
 
 
-def test_files_written_under_the_old_generator_name_are_still_ours(demo, tmp_path):
-    from wanderland_nav.episodes.generate import written_by_us
+def test_a_hand_edited_file_that_keeps_our_generator_block_is_the_users(demo, tmp_path, caplog, monkeypatch):
+    """200 curated episodes must survive a navmesh change: the block's name alone does not make a file ours."""
+    from wanderland_nav.episodes import generate
+    from wanderland_nav.episodes.generate import not_ours_because, written_by_us
 
     scene, nm = demo
     out = tmp_path / "episodes.json"
-    write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
+    write_scene_episodes(scene, nm, out, num_episodes=3, seed=0, settings=FAST)
+    assert written_by_us(out)
     data = json.loads(out.read_text())
-    assert data["generator"]["name"] == "wanderland_nav.make_episodes"
-    data["generator"]["name"] = "wanderland_nav.expert"  # what files of earlier versions say
-    out.write_text(json.dumps(data))
+    data["episodes"] = data["episodes"][:2]  # curated by hand; the generator block is kept
+    out.write_text(json.dumps(data, indent=1))
+    curated = out.read_bytes()
+    assert not written_by_us(out) and "edited after it was written" in not_ours_because(out)
+    monkeypatch.setattr(generate, "navmesh_fingerprint", lambda path: "another navmesh")
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.episodes.generate"):
+        assert not generate.refresh_if_stale(scene, out, lambda: nm)
+    assert out.read_bytes() == curated
+    assert f"{out} was generated on another navmesh or splat, but its bytes are not those written" in caplog.text
+    # make_episodes writes beside it, saying why
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.episodes.generate"):
+        _, summary = write_scene_episodes(scene, nm, out, num_episodes=3, seed=0, settings=FAST)
+    assert summary.out == str(tmp_path / "episodes.generated.json") and out.read_bytes() == curated
+    assert "edited after it was written, so it is the user's" in caplog.text
+    assert written_by_us(tmp_path / "episodes.generated.json")
+
+
+def test_a_byte_change_alone_makes_the_file_the_users(demo, tmp_path):
+    """Same content, other bytes (reformatted, an earlier version's name) or no recorded digest: not ours."""
+    from wanderland_nav.episodes.generate import WRITTEN_DIGEST, not_ours_because, written_by_us
+
+    scene, nm = demo
+    out = tmp_path / "episodes.json.gz"
+    write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
     assert written_by_us(out)
     _, again = write_scene_episodes(scene, nm, out, num_episodes=2, seed=0, settings=FAST)
     assert again.skipped and again.out == str(out)  # up to date in place, not a sibling file
+    plain = tmp_path / "episodes.json"
+    write_scene_episodes(scene, nm, plain, num_episodes=2, seed=0, settings=FAST)
+    data = json.loads(plain.read_text())
+    plain.write_text(json.dumps(data))  # the same content, reformatted
+    assert not written_by_us(plain)
+    del data["generator"][WRITTEN_DIGEST]  # a file of an earlier version: no digest recorded
+    data["generator"]["name"] = "wanderland_nav.expert"
+    plain.write_text(json.dumps(data))
+    assert "records no digest" in not_ours_because(plain)
     data["generator"]["name"] = "someone_else"
-    out.write_text(json.dumps(data))
-    assert not written_by_us(out)
+    plain.write_text(json.dumps(data))
+    assert "no generator block" in not_ours_because(plain)

@@ -118,3 +118,26 @@ def test_memory_cache_holds_views_of_the_raster_not_a_second_copy(l_nm, tmp_path
     assert loaded.cache.stats["disk_hits"] == 3
     assert all(np.shares_memory(r, loaded.source) for r in _MEMORY[loaded.cache.key]["rows"].values())
     np.testing.assert_array_equal(loaded.source, built.source)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "empty", "bit_flipped"])
+def test_a_damaged_pairs_file_is_a_miss_rebuilt_and_named(tmp_path, caplog, damage, damage_file):
+    import logging
+
+    nm = bake(room_with_pillars())
+    goals = nm.random_navigable_points(2, seed=5)
+    built = nm.distance_field(goals).raster(cache_dir=tmp_path)
+    built.ensure()
+    pairs = tmp_path / f"navmesh_raster_v{RASTER_VERSION}_{nm.content_hash}" / "pairs.npz"
+    good = damage_file(pairs, damage)
+    clear_memory()  # a new process, with goals not on disk: their rows are built from the pairs
+    others = nm.random_navigable_points(2, seed=6)
+    with caplog.at_level(logging.WARNING, logger="planners.raster_cache"):
+        again = nm.distance_field(others).raster(cache_dir=tmp_path)
+        again.ensure()
+    clear_memory()
+    reference = nm.distance_field(others).raster()
+    reference.ensure()
+    np.testing.assert_array_equal(again.source, reference.source)
+    assert f"{pairs}: unreadable raster cache" in caplog.text and "rebuilding it" in caplog.text
+    assert pairs.read_bytes() == good  # replaced by the rebuilt one

@@ -169,7 +169,7 @@ def test_read_only_scene_keeps_its_hierarchy_in_the_user_cache(tmp_path, monkeyp
     real_access = os.access  # root may write anywhere: the folder is made read-only for the loader alone
     monkeypatch.setattr("wanderland_nav.render.lod.os.access",
                         lambda p, mode: False if os.path.samefile(p, scene) else real_access(p, mode))
-    monkeypatch.setenv("WANDERLAND_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("WANDERLAND_NAV_CACHE", str(tmp_path / "cache"))  # the one cache variable
     load_splat(scene / "3dgs.ply", lod_px=1.0)
     assert not (scene / "3dgs.lod.npz").exists()
     assert len(list((tmp_path / "cache" / "lod").glob("*.lod.npz"))) == 1
@@ -233,3 +233,19 @@ def test_cut_pairs_render_as_padded_one_camera_scenes(mode, people):
     for a, b in zip(pairs, padded):
         assert a.shape == b.shape
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "empty", "bit_flipped"])
+def test_a_damaged_hierarchy_cache_is_a_miss_rebuilt_and_named(tmp_path, caplog, damage, damage_file):
+    import logging
+
+    path = tmp_path / "3dgs.ply"
+    random_gaussians(300).save(path)
+    first = load_splat(path, lod_px=1.0)
+    cache = tmp_path / "3dgs.lod.npz"
+    damage_file(cache, damage, bit_at=100)
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.render.hierarchy"):
+        again = load_splat(path, lod_px=1.0)
+    torch.testing.assert_close(again.nodes.means, first.nodes.means)
+    assert f"{cache}: unreadable hierarchy cache" in caplog.text
+    assert hier.load_nodes(cache, source_sha256=file_sha256(path)) is not None  # replaced by a sound one

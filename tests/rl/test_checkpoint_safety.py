@@ -139,3 +139,17 @@ def test_saving_something_that_would_need_code_to_load_is_refused_naming_the_key
         save_checkpoint(tmp_path / "c.pt", policy=torch.nn.Linear(2, 2), optimizer=None, counters={},
                         config={"out": Path("x")})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_weights_that_do_not_fit_their_config_name_the_file_and_the_first_key(tmp_path):
+    from wanderland_nav.compose.build import policy_from_checkpoint
+
+    small = make_policy("cnn", image_size=(16, 16), feature_dim=32)
+    config = {"policy": {"name": "cnn", "image_size": [16, 16], "feature_dim": 64}}  # edited after training
+    path = save_checkpoint(tmp_path / "edited.pt", policy=small, optimizer=None, counters={}, config=config)
+    with pytest.raises(WanderlandInputError, match=r"edited\.pt: .*checkpoint does not fit .*weight '[\w.]+' is "
+                                                   r"\[\d+(, \d+)*\] in the file, \[\d+(, \d+)*\] in the policy") as e:
+        policy_from_checkpoint(path)
+    assert e.value.path == path and e.value.field.startswith("policy.")
+    with pytest.raises(WanderlandInputError, match=r"edited\.pt: .*weight '[\w.]+'"):  # the warm-start path too
+        load_policy_weights(make_policy("cnn", image_size=(16, 16), feature_dim=64), path)

@@ -4,7 +4,10 @@ servers) evaluated on every task of a scene or scene set, the same routes for al
 Each (policy, task) evaluation is stored as `<out>/runs/<task>/<policy>.json` (a scene set: one
 `<out>/runs/<task>/<policy>/<scene_id>.json` per scene) with a key over everything it depends on (the
 policy's spec, the task, the env config, the scene and episodes files, split, seed, episode count); a rerun
-reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy and scene.
+reuses the evaluations whose key matches, so an interrupted benchmark resumes per policy and scene. A served
+policy (`url`) is contacted only when one of its evaluations must run (its declaration is stored with each),
+and an evaluation during which its server could not be reached is not stored: it is listed as not finished,
+and the next run does it again.
 Beside `table.txt` and `results.csv` it draws `table.png`: SR with its interval per task, indoor / outdoor,
 one bar per policy (the paper's Table 4 as a chart).
 """
@@ -13,8 +16,8 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import difflib
 import io
-import json
 import logging
 import time
 from dataclasses import dataclass
@@ -25,12 +28,13 @@ from omegaconf import OmegaConf
 
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-from wanderland_nav.cache import file_sha256, json_digest
-from wanderland_nav.compose.build import (blind_env_config, env_factory, load_navmesh, policy_from_checkpoint,
-                                          scene_gaussians, shaped_env_config)
+from wanderland_nav.cache import file_sha256, json_digest, read_record
+from wanderland_nav.compose.build import (blind_env_config, check_env_carries, env_factory, load_navmesh,
+                                          policy_from_checkpoint, scene_gaussians, shaped_env_config)
 from wanderland_nav.compose.comparison import stored_env_config
 from wanderland_nav.compose.identity import scene_identity
-from wanderland_nav.compose.policy_sources import navdp_actor, released_policy, released_weights_policies
+from wanderland_nav.compose.policy_sources import (SOURCE_KEYS, navdp_actor, released_policy,
+                                                   released_weights_policies)
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set
 from wanderland_nav.compose.schema import BenchmarkConfig
@@ -47,6 +51,7 @@ from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.benchmark")
 SOURCES = ("reference", "checkpoint", "target", "url", "model", "navdp_url")
+ENTRY_KEYS = {"name", *SOURCES, "kwargs", "timeout_s", "max_consecutive_failures"}  # a policy entry's keys
 GROUPS = ("overall", "indoor", "outdoor")
 IMAGE_KEYS = {keys.RGB, keys.DEPTH, keys.GOAL_IMAGE}
 
@@ -64,10 +69,19 @@ class Entry:
     image_size: Any = None
     trained_goal_input: str = ""  # checkpoint: the point-goal input it was trained with
     content: str = ""            # checkpoint: the file's digest (part of each evaluation's key)
+    connect: Any = None          # url: () -> actor, called when one of its evaluations must run (reads None till then)
+
+    def ensure_actor(self):
+        """The actor, a served policy contacted now if it was not yet (its declaration read from `/info`)."""
+        if self.actor is None and self.connect is not None:
+            self.actor = self.connect()
+            self.reads = tuple(self.actor.in_keys)
+        return self.actor
 
 
 def policy_entries(c: BenchmarkConfig) -> list[Entry]:
-    """The configured policies, built (a remote server is contacted, a target imported, a checkpoint loaded)."""
+    """The configured policies, built (a target imported, a checkpoint or released file loaded); a served one (`url`,
+    `navdp_url`) is contacted later, when one of its evaluations must run (`Entry.ensure_actor`)."""
     found = released_weights_policies(c.released_weights)[0] if c.released_weights else []
     if not c.policies and not found:
         raise ValueError("benchmark: no policies; e.g. policies='[{name: expert, reference: expert}]'")
@@ -78,6 +92,12 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
         given = [s for s in SOURCES if spec.get(s)]
         if not name or len(given) != 1:
             raise ValueError(f"benchmark policies[{i}]: needs a name and exactly one of {SOURCES}, got {spec}")
+        known = SOURCE_KEYS.get(given[0], ENTRY_KEYS)
+        unknown = sorted(set(spec) - known)
+        if unknown:  # `timeout: 1` for `timeout_s` would run with no limit at all
+            near = difflib.get_close_matches(unknown[0], known, n=1)
+            raise ValueError(f"benchmark policies[{i}]: unknown key {unknown[0]!r}"
+                             + (f" (did you mean {near[0]!r}?)" if near else "") + f"; known: {sorted(known)}")
         if name in seen:
             raise ValueError(f"benchmark policies[{i}]: name {name!r} used twice")
         seen.add(name)
@@ -100,16 +120,21 @@ def policy_entries(c: BenchmarkConfig) -> list[Entry]:
             policy, content = released_policy(spec, c.device)
             out.append(Entry(name, spec, src, tuple(map(str, policy.in_keys)), PolicyActor(policy), content=content))
             continue
-        if src == "navdp_url":
-            actor = navdp_actor(spec, timeout, int(spec.get("max_consecutive_failures", c.max_consecutive_failures)),
-                                c.image_size)
+
+        def connect(spec=spec, src=src, name=name, timeout=timeout):
+            if src == "navdp_url":
+                return navdp_actor(spec, timeout, int(spec.get("max_consecutive_failures", c.max_consecutive_failures)),
+                                   c.image_size)
+            inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else \
+                RemotePolicy(spec["url"], timeout)
+            return ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
+                                 max_consecutive_failures=int(spec.get("max_consecutive_failures",
+                                                                       c.max_consecutive_failures)))
+        if src in ("url", "navdp_url"):  # contacted only when one of its evaluations must run (a rerun with all stored needs no server)
+            out.append(Entry(name, spec, src, None, connect=connect))
+        else:
+            actor = connect()
             out.append(Entry(name, spec, src, tuple(actor.in_keys), actor))
-            continue
-        inner = load_target(spec["target"], spec.get("kwargs")) if src == "target" else RemotePolicy(spec["url"], timeout)
-        actor = ExternalActor(inner, name=name, timeout_s=timeout, default_image_size=tuple(c.image_size),
-                              max_consecutive_failures=int(spec.get("max_consecutive_failures",
-                                                                    c.max_consecutive_failures)))
-        out.append(Entry(name, spec, src, tuple(actor.in_keys), actor))
     return out
 
 
@@ -119,18 +144,24 @@ def _records_with_failures(records: list[dict], actor) -> list[dict]:
     return [{**r, "policy_error": failures.get(int(r["episode_index"]), "")} for r in records]
 
 
-def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, navmesh) -> dict:
-    """One (policy, task) evaluation -> `{"records", "seconds"}`."""
-    split = c.split if c.split is not None else c.env.split
+def entry_env_config(entry: Entry, task, c: BenchmarkConfig):
+    """The env config one (policy, task) evaluation runs in, refused when it would not carry what the policy reads."""
     if entry.source == "reference":  # reads nothing: the camera stays off (its rows are the same in every task)
-        env_cfg = blind_env_config(c.env)
-    else:
-        base = entry.env_config if entry.env_config is not None else c.env
-        env_cfg = shaped_env_config(base, entry.actor.policy if entry.source in ("checkpoint", "model") else entry.actor,
-                                    entry.image_size)
-        if not set(entry.reads) & IMAGE_KEYS:  # a policy that never looks gets no rendering
-            env_cfg = blind_env_config(env_cfg)
-        env_cfg = task_env_config(task, env_cfg)
+        return blind_env_config(c.env)
+    base = entry.env_config if entry.env_config is not None else c.env
+    env_cfg = shaped_env_config(base, entry.actor.policy if entry.source in ("checkpoint", "model") else entry.actor,
+                                entry.image_size)
+    if not set(entry.reads) & IMAGE_KEYS:  # a policy that never looks gets no rendering
+        env_cfg = blind_env_config(env_cfg)
+    env_cfg = task_env_config(task, env_cfg)
+    check_env_carries(entry.reads, env_cfg, f"benchmark {task.label}/{entry.name}")
+    return env_cfg
+
+
+def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, navmesh) -> dict:
+    """One (policy, task) evaluation -> `{"records", "seconds", "transport_error"}`."""
+    split = c.split if c.split is not None else c.env.split
+    env_cfg = entry_env_config(entry, task, c)
     g = scene_gaussians(scene, c.lod_px, needed=env_cfg.camera.enabled)
     env = with_goal_input(env_factory(scene, episodes, env_cfg, split=split, batch_size=c.batch_size, seed=c.seed,
                                       device=c.device, navmesh=navmesh, gaussians=g)(),
@@ -149,7 +180,8 @@ def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, nav
         seconds = time.perf_counter() - t0
     finally:
         env.close()
-    return {"records": _records_with_failures(res.records, entry.actor), "seconds": seconds}
+    return {"records": _records_with_failures(res.records, entry.actor), "seconds": seconds,
+            "transport_error": getattr(entry.actor, "transport_error", None)}
 
 
 def run_key(entry: Entry, task, c: BenchmarkConfig, scene_part: dict) -> str:
@@ -245,9 +277,27 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     if baseline not in {e.name for e in entries}:
         raise ValueError(f"benchmark baseline={baseline!r}: not among the policies {[e.name for e in entries]}")
     header, scenes = benchmark_scenes(c)
+    parts = {sid: scene_identity(scene.root, episodes) for sid, scene, episodes in scenes}
+
+    def stored_run(entry, task, sid) -> tuple[Path, str, dict]:
+        """(file, key, what it holds when its key matches, else {}): one stored evaluation per task, policy, scene."""
+        path = out / "runs" / task.label / (f"{entry.name}.json" if not c.scene.set else f"{entry.name}/{sid}.json")
+        key = run_key(entry, task, c, parts[sid])
+        stored = read_record(path) or {}  # unreadable (a killed copy, a full disk): run again, and said so
+        return path, key, stored if stored.get("key") == key else {}
+
+    for entry in entries:  # a served policy's declaration from its stored evaluations, when they hold it
+        if entry.reads is None:
+            known = [r["reads"] for task in tasks for sid in parts
+                     if isinstance((r := stored_run(entry, task, sid)[2]).get("reads"), list)]
+            if known:
+                entry.reads = tuple(known[0])
+            else:
+                entry.ensure_actor()
     results, seconds, skipped = {}, {}, []  # skipped: notes under the table (rows not run, settings that differ)
     if c.released_weights:
         skipped += [f"released model {m}" for m in released_weights_policies(c.released_weights)[1]]
+    unfinished: dict[tuple[str, str], str] = {}  # (task, policy) -> why an evaluation of it is not a result
     for task in tasks:
         for entry in entries:
             bad = hidden_reads(task, entry.reads)
@@ -259,21 +309,26 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
                     and {keys.GOAL_VECTOR, keys.GOAL_POSE} & set(entry.reads):
                 skipped.append(f"{task.label}/{entry.name}: trained with goal_input={entry.trained_goal_input}, "
                                f"evaluated with goal_input={task.goal_input} (pointgoal_input)")
+            if entry.actor is not None or entry.source == "reference":
+                entry_env_config(entry, task, c)  # a key the env would not carry: refused before any evaluation
             results[(task.label, entry.name)] = []
     for sid, scene, episodes in scenes:  # scene by scene: one scene's navmesh and splat loaded at a time
-        scene_part, navmesh = scene_identity(scene.root, episodes), load_navmesh(scene)
+        navmesh = load_navmesh(scene)
         for task in tasks:
             for entry in entries:
                 if (task.label, entry.name) not in results:
                     continue
                 # one file per evaluation: an interrupted benchmark resumes per task, policy and scene
-                name = f"{entry.name}.json" if not c.scene.set else f"{entry.name}/{sid}.json"
-                path = out / "runs" / task.label / name
-                key = run_key(entry, task, c, scene_part)
-                stored = json.loads(path.read_text()) if path.is_file() else {}
-                if stored.get("key") != key:
-                    stored = {"key": key, "policy": entry.spec, "task": task.label, "scene": sid,
-                              **_evaluate(entry, task, c, scene, episodes, navmesh)}
+                path, key, stored = stored_run(entry, task, sid)
+                if not stored:
+                    entry.ensure_actor()
+                    fresh = _evaluate(entry, task, c, scene, episodes, navmesh)
+                    cause = fresh.pop("transport_error")
+                    if cause:  # the connection failed, not the policy: not a result, never stored as one
+                        unfinished.setdefault((task.label, entry.name), f"{sid}: {cause}")
+                        continue
+                    stored = {"key": key, "policy": entry.spec, "reads": list(entry.reads), "task": task.label,
+                              "scene": sid, **fresh}
                     atomic_write_json(path, stored)
                 else:
                     log.info("%s/%s on %s: stored evaluation reused (%s)", task.label, entry.name, sid, path)
@@ -283,14 +338,21 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
         close = getattr(e.actor, "close", None)
         if close is not None:
             close()
+    for (task_label, name), cause in unfinished.items():  # a row missing a scene's evaluation would be a subset
+        results.pop((task_label, name), None)
+        skipped.append(f"{task_label}/{name}: not finished, nothing of it stored ({cause}); rerun with the policy's "
+                       "server reachable to finish it (the stored evaluations are reused)")
     rows = grouped_rows(results, per_scene=len(scenes) > 1)
     pairs = [(f"{t}/{n}", f"{t}/{baseline}") for (t, n) in results if n != baseline and (t, baseline) in results]
     pooled = "" if len(scenes) == 1 else "; rows without a scene pool every scene's episodes"
     table = "\n".join([f"{header}: split {c.split}, success: {SUCCESS_RULE}{pooled}",
-                       comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs),
+                       comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs) if rows else
+                       "no evaluation finished",
                        *failure_lines(results), *skipped])
     atomic_write_text(out / "table.txt", table + "\n")
     atomic_write_text(out / "results.csv", results_csv(rows))
-    write_study_chart(out / "table.png", sr_chart(rows), title=header, value_label="SR")
+    if rows:
+        write_study_chart(out / "table.png", sr_chart(rows), title=header, value_label="SR")
     atomic_write_json(out / "timing.json", seconds)
-    return {"table": table, "results": results, "rows": rows, "skipped": skipped, "seconds": seconds}
+    return {"table": table, "results": results, "rows": rows, "skipped": skipped, "seconds": seconds,
+            "unfinished": unfinished}

@@ -14,9 +14,11 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import load_goal_images
 from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.episodes import load_episodes
+from wanderland_nav.render import Gaussians
 from wanderland_nav.render.lod import load_splat
-from wanderland_nav.rl.checkpoint import load_checkpoint
+from wanderland_nav.rl.checkpoint import fit_policy_weights, load_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
+from wanderland_nav.scene.checks import check_splat_visible
 from wanderland_nav import viz
 
 
@@ -30,9 +32,27 @@ def shaped_env_config(env: NavEnvConfig, policy, image_size=None) -> NavEnvConfi
     kinematics = dataclasses.replace(env.kinematics, num_waypoints=need.num_waypoints, action_mode=need.action_mode)
     reads = set(getattr(policy, "in_keys", ()))  # a policy that reads the goal view gets the key on point-goal tasks too
     goal_view = True if keys.GOAL_IMAGE in reads else env.observe_goal_image
-    if keys.DEPTH in reads:  # a policy that reads depth gets it rendered
-        camera = dataclasses.replace(camera, depth=True)
+    camera = dataclasses.replace(camera, depth=camera.depth or keys.DEPTH in reads)  # depth rendered for who reads it
     return dataclasses.replace(env, camera=camera, kinematics=kinematics, observe_goal_image=goal_view)
+
+
+#: the env settings that must be on for an observation key to be carried
+KEY_SETTINGS = {keys.RGB: ("camera.enabled",), keys.DEPTH: ("camera.enabled", "camera.depth"),
+                keys.GOAL_IMAGE: ("observe_goal_image",), keys.HAS_GOAL_IMAGE: ("observe_goal_image",),
+                keys.INSTRUCTION_TOKENS: ("observe_instruction",)}
+
+
+def check_env_carries(reads, env: NavEnvConfig, who: str) -> None:
+    """Refuse, naming the key and the setting, a policy that reads a key `env` would not carry (before any
+    episode: the alternative is a `KeyError` at its first step, mid-benchmark)."""
+    for key in reads:
+        for setting in KEY_SETTINGS.get(key, ()):
+            value = env
+            for part in setting.split("."):
+                value = getattr(value, part)
+            if value is False:
+                raise ValueError(f"{who} reads {key!r}, which the env would not carry: env.{setting}=false "
+                                 f"(set env.{setting}=true, or give the policy an env that observes it)")
 
 
 def blind_env_config(env: NavEnvConfig) -> NavEnvConfig:
@@ -51,7 +71,14 @@ def scene_gaussians(scene, lod_px: float | None, *, needed: bool = True):
         raise FileNotFoundError(f"scene {scene.name} ({scene.root}): 3dgs.ply missing, and the camera needs it; "
                                 "fit one (python -m wanderland_nav.fit scene=<folder> export_to_scene=true) or "
                                 "turn the camera off (env.camera.enabled=false)")
+    check_scene_splat(scene)
     return load_splat(path, lod_px)
+
+
+def check_scene_splat(scene) -> None:
+    """Refuse the scene's `3dgs.ply` when its capture cameras would see (almost) none of it
+    (`scene.checks.check_splat_visible`): a camera or goal view over it would be silently blank."""
+    check_splat_visible(Gaussians.load(scene.gaussians_path), scene.cameras, scene.gaussians_path)
 
 
 def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_size: int, seed: int, device: str,
@@ -72,7 +99,8 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
         goal_images = load_goal_images(episodes, [*{p.parent for p in paths}, scene.products, Path(scene.root)], env_cfg.camera.height,
                                        env_cfg.camera.width, where=where)
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
-                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images)
+                   batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images,
+                   episodes_source=where if split is None else f"{where} (split {split})")
 
 
 def load_navmesh(scene):
@@ -113,6 +141,6 @@ def policy_from_checkpoint(path, device: str = "cpu"):
     if "name" not in pol:
         raise ValueError(f"{path}: checkpoint config has no policy.name; cannot rebuild the policy")
     policy = make_policy_from_config(pol, device)
-    policy.load_state_dict(ckpt["policy"])
+    fit_policy_weights(policy, ckpt["policy"], path)
     policy.pretrained_from = str(path)
     return policy.eval(), ckpt

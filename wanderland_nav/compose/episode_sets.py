@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from wanderland_nav.compose.build import load_navmesh
+from wanderland_nav.compose.build import check_scene_splat, load_navmesh
 from wanderland_nav.compose.scene import prepared_scene
 from wanderland_nav.compose.schema import MakeEpisodesConfig, NavigationGroup, SceneGroup
 from wanderland_nav.episodes.generate import write_scene_episodes
@@ -71,6 +71,8 @@ def process_scene(plan: ScenePlan, *, navigation: NavigationGroup, num_episodes:
     scene = prepared_scene(plan.scene, navigation)
     navmesh = load_navmesh(scene)
     out = Path(plan.out) if plan.out else scene.products / "episodes.json"
+    if settings.goal_images and scene.gaussians_path is not None and Path(scene.gaussians_path).is_file():
+        check_scene_splat(scene)  # goal views of a splat nobody can see would be black
     bar = tqdm(total=num_episodes, desc=scene.name, position=position, leave=True, disable=not progress,
                unit="ep", dynamic_ncols=True)
     try:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
 import torch
 
 from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.cache import read_record
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.scene import scene_folder
 from wanderland_nav.compose.schema import FitRunConfig
@@ -26,7 +26,7 @@ def fit_run_dir(c: FitRunConfig, scene_name: str, identity: dict) -> Path:
     out = Path(c.out_dir) if c.out_dir else Path("outputs") / "fit" / scene_name / identity["hash"][:8]
     stamp = out / "identity.json"
     if c.resume and (out / "checkpoints" / "latest.pt").is_file():
-        stored = json.loads(stamp.read_text()) if stamp.is_file() else None
+        stored = read_record(stamp)  # unreadable (truncated): no identity, refused by check_resume with the folder
         check_resume(stored, identity, out, f"start fresh with resume=false or another out_dir= (or delete {out})")
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(stamp, identity)

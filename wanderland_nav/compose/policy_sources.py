@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from policies import make_policy
@@ -24,6 +25,9 @@ RELEASED_FILES = {"gnm": ("gnm_large.pth", "gnm.pth"), "vint": ("vint.pth",), "n
                   "mbra": ("logonav.pth", "mbra.pth"), "citywalker": ("citywalker.ckpt", "CityWalker_2000hr.ckpt")}
 NAVDP_KEYS = ("navdp_goal", "num_waypoints", "hfov_deg", "stop_threshold", "image_size")
 COMMON_KEYS = ("name", "timeout_s", "max_consecutive_failures")
+#: the keys an entry of each of these sources may hold
+SOURCE_KEYS = {"model": {*COMMON_KEYS, *(f.name for f in dataclasses.fields(ReleasedConfig))},
+               "navdp_url": {*COMMON_KEYS, "navdp_url", *NAVDP_KEYS}}
 
 
 def released_weights(policy) -> str | None:

@@ -49,7 +49,8 @@ def above(low: float, default):
 
 
 def _check_ranges(obj, prefix: str = "") -> None:
-    """Every `at_least` / `above` field of `obj` and its nested dataclasses, with the full key in the error."""
+    """Every `at_least` / `above` field of `obj` and its nested dataclasses, with the full key in the error; and
+    every number finite (a library class's `> 0` lets `inf` through, and NaN fails no `if x < low`)."""
     for f in dataclasses.fields(obj):
         value, key = getattr(obj, f.name), f"{prefix}{f.name}"
         if dataclasses.is_dataclass(value):
@@ -58,6 +59,10 @@ def _check_ranges(obj, prefix: str = "") -> None:
             low, strict = f.metadata["min"], f.metadata["strict"]
             if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
                 raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
+        else:
+            numbers = value if isinstance(value, (list, tuple)) else [value]
+            if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
+                raise ValueError(f"{key}={value}: must be a finite number")
 
 
 # ------------------------------------------------------------------------------ shared groups
@@ -441,6 +446,8 @@ class ServePolicyConfig:
     host: str = "127.0.0.1"
     port: int = at_least(0, 8765)        # 0: a free port (the printed url says which)
     device: str = "cpu"
+    max_body_mb: int = at_least(1, 64)   # the largest request body read (its arrays bounded the same, uncompressed)
+    allowed_hosts: List[str] = field(default_factory=list)  # Host names accepted besides IP addresses and localhost
 
 
 SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareConfig, "make_episodes": MakeEpisodesConfig,

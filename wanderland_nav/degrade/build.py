@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.cache import file_sha256, json_digest
+from wanderland_nav.cache import file_sha256, json_digest, read_record
 from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
 from wanderland_nav.render import Gaussians
 from wanderland_nav.scene import colmap as C, load_scene
@@ -165,7 +165,7 @@ def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = N
     key = _source_key(src, spec)
     marker = out / MARKER
     if marker.is_file():
-        if json.loads(marker.read_text()).get("key") == key:
+        if (read_record(marker) or {}).get("key") == key:  # an unreadable marker: rebuilt (and said so)
             log.info("%s is up to date (%s of %s)", out, spec.name, src)
             return out
     elif out.exists():

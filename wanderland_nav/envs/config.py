@@ -108,6 +108,9 @@ class NavEnvConfig:
     def validate(self) -> None:
         """Raise `ValueError` naming the first out-of-range field."""
         c, k, t, r = self.camera, self.kinematics, self.termination, self.reward
+        for name, v in _numbers(self):  # an inf speed or a NaN reward passes every `> 0` below
+            if not math.isfinite(v):
+                raise ValueError(f"NavEnvConfig.{name}: invalid value {v!r} (not a finite number)")
         checks = [
             ("camera.width", c.width >= 8, c.width),
             ("camera.height", c.height >= 8, c.height),
@@ -145,3 +148,15 @@ class NavEnvConfig:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+
+def _numbers(obj, prefix: str = ""):
+    """(dotted name, value) of every int / float setting below a config dataclass (tuples included)."""
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if dataclasses.is_dataclass(v):
+            yield from _numbers(v, f"{prefix}{f.name}.")
+        elif isinstance(v, (tuple, list)):
+            yield from ((f"{prefix}{f.name}[{i}]", x) for i, x in enumerate(v)
+                        if isinstance(x, (int, float)) and not isinstance(x, bool))
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            yield f"{prefix}{f.name}", v

@@ -36,9 +36,14 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
     num_episodes: defaults to the number of episodes in the env (each once). The env is re-seeded
     and switched to in-order episodes for the run (its previous order is restored afterwards).
     """
-    n = len(env.table) if num_episodes is None else int(num_episodes)
+    E = len(env.table)
+    n = E if num_episodes is None else int(num_episodes)
     if n < 1:
         raise ValueError(f"run_evaluation: num_episodes must be >= 1, got {num_episodes}")
+    if n > E:  # the extra episodes would be repeats counted as new ones: an N and intervals the data do not have
+        raise ValueError(f"{getattr(env, 'episodes_source', 'the env')}: num_episodes={n} but the env holds {E} "
+                         f"episode(s) (in its split): each is evaluated once, so N cannot exceed {E}; set "
+                         f"num_episodes<={E}, or null for all of them")
     B = env.batch_size[0]
     budget = (math.ceil(n / B) + 1) * (env.config.termination.max_steps + 1)  # every episode ends by timeout
     order, counted = env.config.episode_order, getattr(env, "count_serials", None)

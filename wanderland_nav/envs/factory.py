@@ -16,7 +16,9 @@ from wanderland_nav.envs.nav_env import NavEnv
 
 def make_nav_env(scene, episodes: Sequence, navmesh, *, gaussians=None, config: NavEnvConfig | None = None,
                  batch_size: int = 1, device: str | torch.device = "cpu", seed: int = 0,
-                 goal_images: tuple[torch.Tensor, torch.Tensor] | None = None) -> NavEnv:
-    """`NavEnv` with `batch_size` agents over `episodes` (a loaded list) of `scene`."""
+                 goal_images: tuple[torch.Tensor, torch.Tensor] | None = None,
+                 episodes_source: str | None = None) -> NavEnv:
+    """`NavEnv` with `batch_size` agents over `episodes` (a loaded list) of `scene`; `episodes_source`: the
+    file(s) they were read from, named by errors."""
     return NavEnv(scene, episodes, batch_size=[int(batch_size)], device=device, config=config, navmesh=navmesh,
-                  gaussians=gaussians, seed=seed, goal_images=goal_images)
+                  gaussians=gaussians, seed=seed, goal_images=goal_images, episodes_source=episodes_source)

@@ -137,6 +137,7 @@ class NavEnv(EnvBase):
         renderer: Renderer | None = None,
         seed: int = 0,
         goal_images: tuple[torch.Tensor, torch.Tensor] | None = None,
+        episodes_source: str | None = None,
     ):
         batch_size = torch.Size(batch_size)
         if len(batch_size) != 1 or batch_size[0] < 1:
@@ -146,7 +147,9 @@ class NavEnv(EnvBase):
         self.config.validate()
         self.scene = scene
         self.episodes = list(episodes)
-        where = f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
+        # the file(s) the episodes came from (`episodes=`), else the scene's own: what errors name
+        where = episodes_source or f"{getattr(scene, 'episodes_path', None) or getattr(scene, 'root', 'scene')}"
+        self.episodes_source = where
         self.navmesh = navmesh
         if self.config.camera.enabled:
             if gaussians is None:

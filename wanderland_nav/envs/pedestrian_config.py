@@ -62,20 +62,33 @@ class PedestrianConfig:
     height_max: float = 1.9  # m
 
     def validate(self) -> None:
-        checks = [
-            ("count", self.count >= 0), ("speed_mean", self.speed_mean > 0), ("speed_std", self.speed_std >= 0),
-            ("speed_min", 0 < self.speed_min <= self.speed_max), ("max_speed_factor", self.max_speed_factor >= 1),
-            ("radius", self.radius > 0), ("mass", self.mass > 0), ("relaxation_time", self.relaxation_time > 0),
-            ("social_range", self.social_range > 0), ("robot_obstacle_strength", self.robot_obstacle_strength >= 0),
-            ("robot_obstacle_range", self.robot_obstacle_range > 0), ("step_time", self.step_time >= 0),
-            ("view_angle_deg", 0 < self.view_angle_deg <= 360), ("out_of_view_weight", 0 <= self.out_of_view_weight <= 1), ("dt", 0 < self.dt <= 0.1),
-            ("waypoints", self.waypoints >= 2), ("arrive_distance", self.arrive_distance > 0),
-            ("pause_probability", 0 <= self.pause_probability <= 1), ("pause_min", 0 <= self.pause_min <= self.pause_max),
-            ("respawn_after", self.respawn_after > 0), ("spawn_clearance", self.spawn_clearance >= 0),
-            ("robot_radius", self.robot_radius > 0), ("personal_space", self.personal_space > 0),
-            ("personal_space_penalty", math.isfinite(self.personal_space_penalty)),
-            ("height_min", 0 < self.height_min <= self.height_max),
-        ]
-        for name, ok in checks:
-            if not ok:
-                raise ValueError(f"NavEnvConfig.pedestrians.{name}: invalid value {getattr(self, name)!r}")
+        """Every number finite and within its stated range (`RANGES`), then the pairs that bound each other."""
+        for name, (lo, hi) in RANGES.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi \
+                    or (v == lo and name in OPEN_BELOW):
+                low = f"({lo:g}" if name in OPEN_BELOW else f"[{lo:g}"
+                raise ValueError(f"NavEnvConfig.pedestrians.{name}: invalid value {v!r} (expected a finite number "
+                                 f"in {low}, {hi:g}])")
+        for small, large in (("speed_min", "speed_max"), ("pause_min", "pause_max"), ("height_min", "height_max")):
+            if getattr(self, small) > getattr(self, large):
+                raise ValueError(f"NavEnvConfig.pedestrians.{small}: invalid value {getattr(self, small)!r} (above "
+                                 f"{large}={getattr(self, large)!r})")
+
+
+#: the closed range of every numeric setting (units as in the fields); `OPEN_BELOW` ones exclude the lower end.
+#: The upper ends are what a crowd of people on foot can mean, with room: a value past them is a typo or a unit slip
+RANGES: dict[str, tuple[float, float]] = {
+    "count": (0, 10_000), "speed_mean": (0, 5), "speed_std": (0, 5), "speed_min": (0, 5), "speed_max": (0, 5),
+    "max_speed_factor": (1, 10), "radius": (0, 2), "mass": (0, 1000), "relaxation_time": (0, 10),
+    "social_strength": (0, 1000), "social_range": (0, 10), "robot_social_strength": (0, 1000),
+    "robot_obstacle_strength": (0, 1000), "robot_obstacle_range": (0, 10), "step_time": (0, 60),
+    "view_angle_deg": (0, 360), "out_of_view_weight": (0, 1), "body_stiffness": (0, 1e7), "friction": (0, 1e7),
+    "dt": (0, 0.1), "waypoints": (2, 100_000), "arrive_distance": (0, 100), "pause_probability": (0, 1),
+    "pause_min": (0, 3600), "pause_max": (0, 3600), "respawn_after": (0, 3600), "spawn_clearance": (0, 1000),
+    "robot_radius": (0, 5), "personal_space": (0, 100), "personal_space_penalty": (-1000, 1000),
+    "height_min": (0, 3), "height_max": (0, 3),
+}
+OPEN_BELOW = {"speed_mean", "speed_min", "speed_max", "radius", "mass", "relaxation_time", "social_range",
+              "robot_obstacle_range", "view_angle_deg", "dt", "arrive_distance", "respawn_after", "robot_radius",
+              "personal_space", "height_min", "height_max"}

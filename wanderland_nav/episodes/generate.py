@@ -34,8 +34,10 @@ from wanderland_nav.episodes.schema import (
     EpisodeFormatError,
     Goal,
     load_episode_file,
+    dump_episodes,
+    read_episode_bytes,
     rotation_from_yaw,
-    save_episodes,
+    write_episode_bytes,
 )
 from wanderland_nav.geometry import wrap_angle
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
@@ -397,14 +399,48 @@ GENERATOR_NAME = "wanderland_nav.make_episodes"  # the `generator.name` this pro
 OUR_GENERATOR_NAMES = (GENERATOR_NAME, "wanderland_nav.expert")
 
 
-def written_by_us(path: Path) -> bool:
-    """Whether `path` is an episodes file this project wrote (valid schema and our `generator` block)."""
+#: the `generator` field holding the sha256 of the file's own (uncompressed) bytes as written, computed with
+#: this field set to `_UNSTAMPED`: any later change to the bytes (a hand edit, a reformat) shows as a mismatch
+WRITTEN_DIGEST = "written_sha256"
+_UNSTAMPED = "0" * 64
+
+
+def _stamp(digest: str) -> bytes:
+    return f'"{WRITTEN_DIGEST}": "{digest}"'.encode()
+
+
+def _stamped(data: bytes) -> bytes:
+    """`data` (written with `WRITTEN_DIGEST` = `_UNSTAMPED`) with the sha256 of those bytes in its place."""
+    return data.replace(_stamp(_UNSTAMPED), _stamp(hashlib.sha256(data).hexdigest()), 1)
+
+
+def not_ours_because(path: Path) -> str | None:
+    """Why `path` is not an episodes file this project wrote byte for byte (None: it is).
+
+    Ours means: a valid episodes file, our `generator` block, and bytes whose sha256 (with the recorded
+    digest blanked) is the digest recorded when it was written. A file whose block survived a hand edit is
+    the user's: it is never regenerated in place."""
     try:
         f = load_episode_file(path)
-    except (EpisodeFormatError, OSError):
-        return False
+    except (EpisodeFormatError, OSError) as e:
+        return f"not an episodes file of this project ({e})"
     gen = f.extras.get("generator")
-    return isinstance(gen, dict) and gen.get("name") in OUR_GENERATOR_NAMES
+    if not (isinstance(gen, dict) and gen.get("name") in OUR_GENERATOR_NAMES):
+        return "it has no generator block of this project"
+    recorded = gen.get(WRITTEN_DIGEST)
+    if not isinstance(recorded, str) or len(recorded) != 64:
+        return f"its generator block records no digest of the bytes written (generator.{WRITTEN_DIGEST})"
+    raw = read_episode_bytes(path)
+    if raw.count(_stamp(recorded)) != 1 or \
+            hashlib.sha256(raw.replace(_stamp(recorded), _stamp(_UNSTAMPED))).hexdigest() != recorded:
+        return (f"its bytes are not those written (their sha256 differs from generator.{WRITTEN_DIGEST}): "
+                "edited after it was written, so it is the user's")
+    return None
+
+
+def written_by_us(path: Path) -> bool:
+    """Whether `path` is an episodes file this project wrote, unchanged since (`not_ours_because`)."""
+    return not_ours_because(path) is None
 
 
 def generated_sibling(path: Path) -> Path:
@@ -417,11 +453,12 @@ def episodes_target(out: Path, *, force: bool) -> Path:
     """Where to write: `out`, unless `out` exists and this project did not write it (released data, a
     hand-edited or foreign file): then its `generated_sibling`, so released data is never overwritten.
     `force=True` overwrites whatever is at `out`."""
-    if force or not out.exists() or written_by_us(out):
+    why = None if force or not out.exists() else not_ours_because(out)
+    if why is None:
         return out
     target = generated_sibling(out)
-    log.warning("%s was not written by %s (released data?): left untouched; generated episodes go to %s "
-                "(force=true overwrites it)", out, GENERATOR_NAME, target)
+    log.warning("%s was not written by %s (%s): left untouched; generated episodes go to %s "
+                "(force=true overwrites it)", out, GENERATOR_NAME, why, target)
     return target
 
 
@@ -489,7 +526,8 @@ def refresh_if_stale(scene, path: Path, load_navmesh: Callable[[], Any]) -> bool
 
     Why: a changed navmesh (another navigation agent, a re-prepared scene) makes old routes wrong (a goal on
     another island, a path through a new wall), and the file's size alone cannot tell."""
-    if not written_by_us(path):
+    why = not_ours_because(path)
+    if why is not None and not why.startswith("its "):  # not ours at all (no block, not an episodes file)
         return False
     gen = load_episode_file(path).extras.get("generator", {})
     try:
@@ -500,6 +538,10 @@ def refresh_if_stale(scene, path: Path, load_navmesh: Callable[[], Any]) -> bool
     digest = args_hash(scene.name, num, seed, settings, source, navmesh_fingerprint(getattr(scene, "navmesh_path", None)),
                        splat_fingerprint(scene, settings))
     if gen.get("args_hash") == digest:
+        return False
+    if why is not None:  # our block survived a hand edit: the user's file now, kept; said, since its routes are stale
+        log.warning("%s: %s was generated on another navmesh or splat, but %s; it is used as it is, never "
+                    "regenerated in place (make_episodes writes fresh episodes beside it)", scene.name, path, why)
         return False
     if source != RuleBasedInstructions.name:  # instructions from a source this process cannot rebuild: said, kept
         log.warning("%s: %s was generated on another navmesh or splat, with instructions from %r, which this "
@@ -555,8 +597,9 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
     }
     if num_episodes > 0 and not episodes:
         raise EmptyEpisodeSetError(_why_no_episodes(scene, navmesh, summary, settings, num_episodes), path=out)
+    extras["generator"][WRITTEN_DIGEST] = _UNSTAMPED
     previous = _image_set(out)
-    save_episodes(out, episodes, extras)
+    write_episode_bytes(out, _stamped(dump_episodes(episodes, extras, source=str(out))))
     _drop_unused_image_set(out, previous, keep=image_dir)
     summary.out = str(out)
     log.info("%s: %d episodes written to %s", scene.name, len(episodes), out)

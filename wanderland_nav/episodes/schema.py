@@ -240,8 +240,8 @@ class EpisodeFile:
 # --------------------------------------------------------------------------- file I/O
 
 
-def load_episode_file(path: str | os.PathLike) -> EpisodeFile:
-    """Read and validate `episodes.json` (or `.json.gz`); errors name the file, index and field."""
+def read_episode_bytes(path: str | os.PathLike) -> bytes:
+    """The JSON bytes of an episodes file (`.json.gz` decompressed)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: episodes file not found")
@@ -251,6 +251,22 @@ def load_episode_file(path: str | os.PathLike) -> EpisodeFile:
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as e:  # a truncated .gz raises EOFError
             raise EpisodeFormatError(f"{path}: not a valid gzip file ({e})") from None
+    return raw
+
+
+def write_episode_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write JSON bytes atomically; `.json.gz` is gzipped with a fixed mtime (byte-identical)."""
+    path = Path(path)
+    if path.suffix == ".gz":
+        data = gzip.compress(data, compresslevel=6, mtime=0)
+    atomic_write_bytes(path, data)
+    return path
+
+
+def load_episode_file(path: str | os.PathLike) -> EpisodeFile:
+    """Read and validate `episodes.json` (or `.json.gz`); errors name the file, index and field."""
+    path = Path(path)
+    raw = read_episode_bytes(path)
     try:
         data = json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
@@ -304,12 +320,7 @@ def dump_episodes(episodes: Sequence[Episode], extras: dict[str, Any] | None = N
 def save_episodes(path: str | os.PathLike, episodes: Sequence[Episode],
                   extras: dict[str, Any] | None = None) -> Path:
     """Validate and write atomically; `.json.gz` is gzipped with a fixed mtime (byte-identical)."""
-    path = Path(path)
-    data = dump_episodes(episodes, extras, source=str(path))
-    if path.suffix == ".gz":
-        data = gzip.compress(data, compresslevel=6, mtime=0)
-    atomic_write_bytes(path, data)
-    return path
+    return write_episode_bytes(path, dump_episodes(episodes, extras, source=str(path)))
 
 
 # --------------------------------------------------------------------------- headings

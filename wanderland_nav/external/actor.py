@@ -6,12 +6,16 @@ answer within `timeout_s`), every agent of that step gets a NaN action: the env 
 the step (`nonfinite_actions`), so their episodes end as failures, never as silently shorter tables; the cause
 is kept per episode (`failures`, keyed by the env's episode index) for the results. A call that hangs cannot be
 stopped from Python, so after a time-out (or `max_consecutive_failures` failed calls in a row) the actor gives
-up on the policy and fails the remaining steps at once: the evaluation always ends.
+up on the policy and fails the remaining steps at once: the evaluation always ends. Each call runs on a daemon
+thread, so a call abandoned after its time limit never keeps the process alive once the evaluation is over.
+
+A failure of the connection to a served policy (the server died, `RemotePolicyError.transport`) is recorded as
+`transport_error` besides: such an evaluation measured the network, not the policy, and the benchmark does not
+store it as finished.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import threading
 from dataclasses import dataclass
 
@@ -22,6 +26,10 @@ from tensordict import TensorDict, TensorDictBase
 from policies.config import EnvRequirements
 from wanderland_nav import keys
 from wanderland_nav.external.protocol import NEW_EPISODE, check_waypoints, describe
+
+
+class _NoAnswer(Exception):
+    """The policy's call did not return within the time limit (a policy's own TimeoutError is its failure)."""
 
 
 @dataclass(frozen=True)
@@ -54,33 +62,48 @@ class ExternalActor:
         self.calls = 0
         self._given_up: str | None = None
         self._in_a_row = 0
-        self._pool: cf.ThreadPoolExecutor | None = None
+        self.transport_error: str | None = None  # the first failed call that was the connection's, not the policy's
 
     def reset(self) -> None:
         """A fresh evaluation: failure records cleared (a policy given up on stays given up)."""
         self.failures = {}
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        """Nothing held: each call's thread ends with it (a hung one is a daemon, abandoned)."""
+
+    def _call(self, obs):
+        """`policy.act(obs)` on a daemon thread, waited for `timeout_s` (a ThreadPoolExecutor's worker would be
+        joined at interpreter exit, so a hung call would keep the process alive after the table is written)."""
+        done, box = threading.Event(), {}
+
+        def run():
+            try:
+                box["out"] = self.policy.act(obs)
+            except BaseException as e:  # handed to the caller's thread
+                box["error"] = e
+            finally:
+                done.set()
+
+        threading.Thread(target=run, name=f"policy-{self.name}-{self.calls}", daemon=True).start()
+        if not done.wait(self.timeout_s):
+            raise _NoAnswer
+        if "error" in box:
+            raise box["error"]
+        return box["out"]
 
     def _act(self, obs: dict[str, np.ndarray], batch: int) -> np.ndarray | str:
         """The policy's waypoints `[B, K, 2]` or why there are none."""
         if self._given_up is not None:
             return self._given_up
-        if self._pool is None:
-            self._pool = cf.ThreadPoolExecutor(1, thread_name_prefix=f"policy-{self.name}")
-        future = self._pool.submit(self.policy.act, obs)
         try:
-            out = check_waypoints(future.result(timeout=self.timeout_s), batch, self.num_waypoints)
-        except cf.TimeoutError:
+            out = check_waypoints(self._call(obs), batch, self.num_waypoints)
+        except _NoAnswer:
             self._given_up = f"no answer within {self.timeout_s:g} s (given up: later steps fail at once)"
-            self._pool.shutdown(wait=False, cancel_futures=True)  # the hung call keeps its thread; never waited for
-            self._pool = None
-            return self._given_up
+            return self._given_up  # the hung call keeps its daemon thread; never waited for
         except Exception as e:  # the policy's own error, whatever it is, is a failed step
             out = f"raised {type(e).__name__}: {e}"
+            if getattr(e, "transport", False) and self.transport_error is None:
+                self.transport_error = str(e)
         if isinstance(out, str):
             self._in_a_row += 1
             if self._in_a_row >= self.max_consecutive_failures:

@@ -44,6 +44,7 @@ from PIL import Image
 
 from wanderland_nav import keys
 from wanderland_nav.external.protocol import NEW_EPISODE, ExternalPolicy, describe
+from wanderland_nav.external.server import MAX_BODY_BYTES, is_loopback, request_refusal
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,8 @@ STEPS = {"point": "/pointgoal_step", "image": "/imagegoal_step", "none": "/nogoa
 GOAL_KEY = {"point": keys.GOAL_VECTOR, "image": keys.GOAL_IMAGE, "none": None}
 DEPTH_SCALE = 10000.0   # PNG units per metre (0.1 mm)
 JPEG_QUALITY = 95       # OpenCV's imencode default
+MAX_BATCH = 1024        # envs one /navigator_reset may ask for
+MAX_PIXELS = 1 << 25    # pixels of one stacked image a server decodes (a PNG or JPEG inflates far beyond its bytes)
 
 
 class NavDPError(RuntimeError):
@@ -66,9 +69,17 @@ def encode_rgb(frames: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def _open_bounded(data: bytes) -> Image.Image:
+    """The image, refused from its header (before any pixel is decoded) when it holds more than `MAX_PIXELS`."""
+    img = Image.open(io.BytesIO(data))
+    if img.width * img.height > MAX_PIXELS:
+        raise ValueError(f"image of {img.width} x {img.height} pixels, above the limit of {MAX_PIXELS}")
+    return img
+
+
 def decode_rgb(data: bytes, batch: int) -> np.ndarray:
     """The JPEG -> uint8 `[B, H, W, 3]` as their servers hold it after their channel swap."""
-    img = np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))[..., ::-1]
+    img = np.asarray(_open_bounded(data).convert("RGB"))[..., ::-1]
     if img.shape[0] % batch:
         raise ValueError(f"image of {img.shape[0]} rows does not stack {batch} frames")
     return np.ascontiguousarray(img.reshape(batch, -1, img.shape[1], 3))
@@ -85,7 +96,7 @@ def encode_depth(depth: np.ndarray) -> bytes:
 
 def decode_depth(data: bytes, batch: int) -> np.ndarray:
     """The PNG -> float32 metres `[B, H, W, 1]` (their servers: `convert('I')`, / 10000)."""
-    d = np.asarray(Image.open(io.BytesIO(data)).convert("I")).astype(np.float32) / DEPTH_SCALE
+    d = np.asarray(_open_bounded(data).convert("I")).astype(np.float32) / DEPTH_SCALE
     return d.reshape(batch, -1, d.shape[1], 1)
 
 
@@ -246,8 +257,13 @@ class _Handler(BaseHTTPRequestHandler):
         self.wfile.write(body)
 
     def do_POST(self):  # noqa: N802 (http.server's naming)
-        body = self.rfile.read(int(self.headers.get("Content-Length") or 0))
         srv: NavDPServer = self.server
+        form_path = self.path not in ("/navigator_reset", "/navigator_reset_env")
+        refusal = request_refusal(self.headers, srv, ("multipart/form-data",) if form_path else ("application/json",))
+        if refusal is not None:
+            self.close_connection = True  # the body, if any, is never read
+            return self._send_json(refusal[0], {"error": refusal[1]})
+        body = self.rfile.read(int(self.headers["Content-Length"]))
         try:
             with srv.lock:
                 if self.path == "/navigator_reset":
@@ -288,7 +304,8 @@ class NavDPServer(ThreadingHTTPServer):
 
     daemon_threads = True
 
-    def __init__(self, policy, host: str = "127.0.0.1", port: int = 0, algo: str | None = None):
+    def __init__(self, policy, host: str = "127.0.0.1", port: int = 0, algo: str | None = None, *,
+                 max_body_bytes: int = MAX_BODY_BYTES, allowed_hosts: tuple[str, ...] = ()):
         info = describe(policy)
         carried = {keys.RGB, keys.DEPTH, keys.GOAL_VECTOR, keys.GOAL_IMAGE, keys.HAS_GOAL_IMAGE}
         missing = [k for k in info["observes"] if k not in carried]
@@ -301,7 +318,11 @@ class NavDPServer(ThreadingHTTPServer):
         self.history: list[list[np.ndarray]] = []
         self.depths: list[list[np.ndarray]] = []
         self.new = np.zeros(0, dtype=bool)
+        self.max_body_bytes, self.allowed_hosts = int(max_body_bytes), tuple(allowed_hosts)
         super().__init__((host, int(port)), _Handler)
+        if not is_loopback(host):
+            log.warning("serving %s (NavDP contract) on %s, not a loopback address: anyone who can reach port %d can "
+                        "drive the policy", type(policy).__name__, host, self.server_address[1])
 
     @property
     def url(self) -> str:
@@ -309,8 +330,8 @@ class NavDPServer(ThreadingHTTPServer):
         return f"http://{host}:{port}"
 
     def reset(self, batch: int) -> None:
-        if batch < 1:
-            raise ValueError(f"batch_size={batch} must be >= 1")
+        if not 1 <= batch <= MAX_BATCH:
+            raise ValueError(f"batch_size={batch} outside [1, {MAX_BATCH}]")
         self.batch = batch
         self.history = [[] for _ in range(batch)]
         self.depths = [[] for _ in range(batch)]

@@ -28,6 +28,10 @@ from wanderland_nav import keys
 
 PROTOCOL = "wanderland-nav-policy/1"
 NEW_EPISODE = "new_episode"
+#: upper bounds of a declaration: the env renders `context` frames of `image_size` per agent and step, so a
+#: declaration (a remote server's `/info` included) past them would exhaust memory before any episode; they are
+#: well above what navigation models use (NoMaD 96 x 96 x 5 frames, 8 waypoints; CityWalker 5 frames)
+MAX_IMAGE_SIDE, MAX_CONTEXT, MAX_WAYPOINTS = 2048, 64, 64
 #: what an external policy may declare it reads (the env's policy-facing observation keys)
 OBSERVABLE = (keys.RGB, keys.DEPTH, keys.PAST_POSITIONS, keys.GOAL_VECTOR, keys.GOAL_POSE, keys.GOAL_IMAGE,
               keys.HAS_GOAL_IMAGE, keys.INSTRUCTION_TOKENS)
@@ -58,13 +62,14 @@ def describe(policy) -> dict[str, Any]:
     if bad or not observes:
         raise ValueError(f"{name}.observes: {list(observes)}; every entry must be one of {list(OBSERVABLE)}")
     k, ctx = int(getattr(policy, "num_waypoints", 0)), int(getattr(policy, "context", 0))
-    if k < 1 or ctx < 1:
-        raise ValueError(f"{name}: num_waypoints={k} and context={ctx} must be >= 1")
+    if not (1 <= k <= MAX_WAYPOINTS and 1 <= ctx <= MAX_CONTEXT):
+        raise ValueError(f"{name}: num_waypoints={k} must be in [1, {MAX_WAYPOINTS}] and context={ctx} in "
+                         f"[1, {MAX_CONTEXT}]")
     size = getattr(policy, "image_size", None)
     if size is not None:
         size = [int(v) for v in size]
-        if len(size) != 2 or min(size) < 8:
-            raise ValueError(f"{name}.image_size: expected (height, width) >= 8 or None, got {size}")
+        if len(size) != 2 or min(size) < 8 or max(size) > MAX_IMAGE_SIDE:
+            raise ValueError(f"{name}.image_size: expected (height, width) in [8, {MAX_IMAGE_SIDE}] or None, got {size}")
     if not callable(getattr(policy, "act", None)):
         raise TypeError(f"{name}: no act(obs) method")
     return {"protocol": PROTOCOL, "observes": list(observes), "num_waypoints": k, "context": ctx, "image_size": size}

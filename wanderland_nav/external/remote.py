@@ -21,12 +21,21 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from wanderland_nav.external.protocol import PROTOCOL
+from wanderland_nav.external.protocol import PROTOCOL, describe
 from wanderland_nav.external.wire import CONTENT_TYPE, pack, unpack
 
 
+MAX_ANSWER_BYTES = 16 << 20  # waypoints [B, K, 2] float32: 64 kB for 1024 agents of 8 waypoints
+
+
 class RemotePolicyError(RuntimeError):
-    """The remote policy is unreachable, too slow, or answered something unusable."""
+    """The remote policy is unreachable, too slow, or answered something unusable. `transport`: the server could
+    not be reached or dropped the connection (it died, or the network did), which says nothing about the policy:
+    an evaluation with such a failure is not a result (`ExternalActor.transport_error`)."""
+
+    def __init__(self, message: str, *, transport: bool = False):
+        super().__init__(message)
+        self.transport = transport
 
 
 class RemotePolicy:
@@ -54,6 +63,7 @@ class RemotePolicy:
             self.observes = tuple(info["observes"])
             self.num_waypoints, self.context = int(info["num_waypoints"]), int(info["context"])
             self.image_size = tuple(info["image_size"]) if info.get("image_size") else None
+            describe(self)  # the same checks and bounds as an in-process policy's
         except (KeyError, TypeError, ValueError) as e:
             raise RemotePolicyError(f"{self.url}/info: malformed declaration {info!r} ({e})") from None
 
@@ -73,10 +83,11 @@ class RemotePolicy:
         except ConnectionRefusedError:
             self.close()
             raise RemotePolicyError(f"{where}: connection refused: no policy server is running there (start one with "
-                                    "python -m wanderland_nav.serve_policy target=pkg.mod:Class port=<port>)") from None
+                                    "python -m wanderland_nav.serve_policy target=pkg.mod:Class port=<port>)",
+                                    transport=True) from None
         except (OSError, http.client.HTTPException) as e:
             self.close()
-            raise RemotePolicyError(f"{where}: {type(e).__name__}: {e}") from None
+            raise RemotePolicyError(f"{where}: {type(e).__name__}: {e}", transport=True) from None
 
     def _json(self, method: str, path: str):
         status, _, data = self._request(method, path)
@@ -100,7 +111,7 @@ class RemotePolicy:
         if not ctype.startswith(CONTENT_TYPE):
             raise RemotePolicyError(f"{where}: answered Content-Type {ctype!r}, expected {CONTENT_TYPE}")
         try:
-            arrays = unpack(data, where)
+            arrays = unpack(data, where, max_bytes=MAX_ANSWER_BYTES, keys=("waypoints",))
         except ValueError as e:
             raise RemotePolicyError(str(e)) from None
         if "waypoints" not in arrays:

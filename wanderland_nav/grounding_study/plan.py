@@ -184,7 +184,14 @@ class Manifest:
         self.entries: dict[str, dict] = self._read()
 
     def _read(self) -> dict[str, dict]:
-        return json.loads(self.path.read_text()) if self.path.is_file() else {}
+        if not self.path.is_file():
+            return {}
+        try:
+            return json.loads(self.path.read_text())
+        except (OSError, ValueError) as e:  # truncated or emptied: its cells are redone, never a crash that sticks
+            log.warning("%s: unreadable done-manifest (%s); its cells are redone and the manifest replaced",
+                        self.path, e)
+            return {}
 
     def entry(self, key: str, digest: str) -> dict | None:
         """The entry `key` has for `digest` (current or earlier), as of the last `status` / `record`."""

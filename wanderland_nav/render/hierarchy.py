@@ -23,7 +23,10 @@ children cover.
 
 from __future__ import annotations
 
+import logging
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -34,6 +37,8 @@ from wanderland_nav.atomic import atomic_path
 
 from .gaussians import Gaussians
 from .packed import RADIUS_SIGMAS
+
+log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 2
 MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [children, K, 3] temporaries)
@@ -392,5 +397,7 @@ def load_nodes(path: Path, *, source_sha256: str) -> InteriorNodes | None:
             if str(z["source_sha256"]) != source_sha256 or int(z["format_version"]) != FORMAT_VERSION:
                 return None
             return InteriorNodes(*(torch.from_numpy(np.array(z[f.name])) for f in fields(InteriorNodes)))
-    except (OSError, KeyError, ValueError):
+    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        # truncated, empty, bit-flipped (a member's CRC) or foreign: a miss, rebuilt and replaced by the caller
+        log.warning("%s: unreadable hierarchy cache (%s: %s); rebuilding it", path, type(e).__name__, e)
         return None

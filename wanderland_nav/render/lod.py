@@ -4,8 +4,10 @@
 view at `lod_px` pixels (`hierarchy.py`; `render()` takes it in place of `Gaussians`), or, with
 `lod_px=None`, all Gaussians (the differentiable reference). The hierarchy is cached as
 `<splat stem>.lod.npz` beside the splat, keyed by the splat's sha256 and the format version, written
-atomically, and rebuilt when either changes. A folder that cannot be written keeps its cache in
-`$WANDERLAND_CACHE` (default `~/.cache/wanderland_nav`) under the splat's hash, and says so.
+atomically, and rebuilt when either changes (an unreadable one too: truncated, empty or bit-flipped, it is a
+miss, named in a warning). A folder that cannot be written keeps its cache in the user cache folder
+(`wanderland_nav.cache.cache_root`: `$WANDERLAND_NAV_CACHE`, default `~/.cache/wanderland_nav`) under the splat's
+hash, and says so.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 import torch
 
 from .gaussians import Gaussians
-from wanderland_nav.cache import file_sha256
+from wanderland_nav.cache import cache_root, file_sha256
 
 from .hierarchy import GaussianHierarchy, build_hierarchy, load_nodes, save_nodes
 
@@ -34,8 +36,7 @@ def cache_path(splat: Path, sha256: str) -> Path:
     """Where the hierarchy of `splat` lives: beside it when its folder is writable, else the user cache."""
     if os.access(splat.parent, os.W_OK):
         return splat.with_name(f"{splat.stem}.lod.npz")
-    root = Path(os.environ.get("WANDERLAND_CACHE", Path.home() / ".cache" / "wanderland_nav"))
-    return root / "lod" / f"{sha256[:32]}.lod.npz"
+    return cache_root() / "lod" / f"{sha256[:32]}.lod.npz"
 
 
 def load_splat(path: str | os.PathLike, lod_px: float | None = DEFAULT_LOD_PX, *, device: str | torch.device = "cpu") -> Gaussians | GaussianHierarchy:

@@ -107,13 +107,28 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 def load_policy_weights(policy: torch.nn.Module, path: str | Path) -> dict[str, Any]:
     """Load only the policy weights (warm start from a BC checkpoint); strict, with a clear error."""
     ckpt = load_checkpoint(path)
-    try:
-        policy.load_state_dict(ckpt["policy"], strict=True)
-    except RuntimeError as e:  # missing/unexpected keys or shape mismatches
-        first = str(e).strip().splitlines()[1:3]
-        raise ValueError(f"{path}: checkpoint does not fit {type(policy).__name__} (wrong policy or config?): "
-                         f"{' '.join(s.strip() for s in first)}") from None
+    fit_policy_weights(policy, ckpt["policy"], path)
     return ckpt
+
+
+def fit_policy_weights(policy: torch.nn.Module, state: dict, path: str | Path) -> None:
+    """`policy.load_state_dict(state)`, refused first (`WanderlandInputError` naming `path` and the first weight
+    missing, unexpected or of another shape) when the weights do not fit the policy its config builds."""
+    own = policy.state_dict()
+    where = f"checkpoint does not fit {type(policy).__name__} (another policy, or its config edited?)"
+    for key, value in own.items():
+        theirs = state.get(key) if isinstance(state, dict) else None
+        if theirs is None:
+            raise WanderlandInputError(f"{where}: weight {key!r} {list(value.shape)} is not in the file",
+                                       path=path, field=f"policy.{key}")
+        if tuple(getattr(theirs, "shape", ())) != tuple(value.shape):
+            raise WanderlandInputError(f"{where}: weight {key!r} is {list(getattr(theirs, 'shape', ()))} in the file, "
+                                       f"{list(value.shape)} in the policy", path=path, field=f"policy.{key}")
+    extra = [k for k in state if k not in own]
+    if extra:
+        raise WanderlandInputError(f"{where}: the file has weight {extra[0]!r} the policy does not "
+                                   f"({len(extra)} such)", path=path, field=f"policy.{extra[0]}")
+    policy.load_state_dict(state, strict=True)
 
 
 class Checkpointer:

@@ -80,8 +80,12 @@ def logged_before(state: dict | None, results: dict) -> Callable[[int, str], boo
 def _load_results(path: Path, state, identity_hash: str) -> dict:
     if state is None or not path.is_file():
         return {}
-    rows = json.loads(path.read_text())
-    return {k: v for k, v in rows.items() if v.get("identity") == identity_hash}
+    try:
+        rows = json.loads(path.read_text())
+    except (OSError, ValueError) as e:  # truncated or emptied: the evaluations it held are run again
+        log.warning("%s: unreadable stored evaluations (%s); they are run again and the file replaced", path, e)
+        return {}
+    return {k: v for k, v in rows.items() if isinstance(v, dict) and v.get("identity") == identity_hash}
 
 
 @contextmanager

@@ -17,6 +17,7 @@ import logging
 import numpy as np
 from scipy.spatial import cKDTree
 
+from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import parse_up_axis
 
 log = logging.getLogger(__name__)
@@ -107,3 +108,70 @@ def empty_navmesh_reasons(scene, navmesh_settings, collision_sidecar: dict) -> s
             f"{s.agent_max_climb} m, max slope {s.agent_max_slope} deg (a floor narrower than 2 x radius "
             "or with less headroom is not walkable).")
 
+
+
+class BlankSplatError(WanderlandInputError):
+    """A splat that shows (nearly) nothing from its own capture cameras: a camera over it renders blank frames."""
+
+
+def splat_visibility(gaussians, cameras, *, sample: int = 50_000, max_cameras: int = 32, min_px: float = 0.5,
+                     seed: int = 0) -> dict:
+    """How many of (a seeded sample of) the splat's Gaussians a capture camera would draw.
+
+    A Gaussian counts as visible when all its parameters are finite, its opacity is at least 1/255 (one grey
+    level), and in at least one of up to `max_cameras` evenly spaced capture cameras it lies in front, within the
+    image (its 3-sigma footprint overlapping it) and at least `min_px` pixels across. -> counts of the sample:
+    `sampled`, `nonfinite`, `transparent`, `unseen` (finite and opaque but in no view or too small), `visible`,
+    and `cameras` used (0: the scene has none, and only finiteness and opacity are checked)."""
+    import torch
+
+    n = len(gaussians)
+    idx = torch.from_numpy(np.sort(np.random.default_rng(seed).choice(n, min(n, sample), replace=False)))
+    mean, log_scale = gaussians.means[idx].float(), gaussians.log_scales[idx].float()
+    params = torch.cat([mean, log_scale, gaussians.quats[idx], gaussians.opacity_logits[idx, None],
+                        gaussians.sh_dc[idx]], 1).float()
+    finite = torch.isfinite(params).all(1) & (gaussians.quats[idx].float().norm(dim=1) > 0)
+    opaque = finite & (torch.sigmoid(gaussians.opacity_logits[idx].float()) >= 1 / 255)
+    cams = list(cameras)[:: max(1, -(-len(cameras) // max_cameras))]
+    seen = torch.ones_like(opaque) if not cams else torch.zeros_like(opaque)
+    if cams:
+        T = torch.as_tensor(np.stack([c.cam_from_world for c in cams]), dtype=torch.float32)  # [C, 4, 4]
+        K = torch.as_tensor(np.stack([c.K for c in cams]), dtype=torch.float32)  # [C, 3, 3]
+        wh = torch.tensor([[c.width, c.height] for c in cams], dtype=torch.float32)  # [C, 2]
+        fisheye = torch.tensor([c.camera_model == "fisheye" for c in cams])[:, None]  # [C, 1]
+        p = torch.einsum("cij,nj->cni", T[:, :3, :3], torch.nan_to_num(mean)) + T[:, None, :3, 3]  # [C, S, 3]
+        dist = p.norm(dim=-1).clamp_min(1e-9)
+        z = p[..., 2]
+        f, c0 = K[:, None, [0, 1], [0, 1]], K[:, None, :2, 2]  # [C, 1, 2] focal lengths, principal point
+        px = 3 * torch.nan_to_num(log_scale).exp().amax(1) * f[..., 0] / torch.where(fisheye, dist, z.clamp_min(1e-9))
+        uv = f * p[..., :2] / z.clamp_min(1e-9)[..., None] + c0  # [C, S, 2] (pinhole)
+        in_image = ((uv + px[..., None] >= 0) & (uv - px[..., None] <= wh[:, None])).all(-1) & (z > 1e-3)
+        in_view = torch.where(fisheye, z / dist > -0.09, in_image)  # a fisheye: within 95 degrees of its axis
+        seen = (in_view & (px >= min_px)).any(0)
+    visible = opaque & seen
+    return {"sampled": int(idx.numel()), "nonfinite": int((~finite).sum()), "transparent": int((finite & ~opaque).sum()),
+            "unseen": int((opaque & ~seen).sum()), "visible": int(visible.sum()), "cameras": len(cams)}
+
+
+#: below this share of visible Gaussians a splat is refused, below `SPLAT_WARN_SHARE` warned about
+SPLAT_MIN_SHARE, SPLAT_WARN_SHARE = 0.01, 0.10
+
+
+def check_splat_visible(gaussians, cameras, path) -> dict:
+    """Refuse (`BlankSplatError`) a splat whose capture cameras would see almost none of its Gaussians, whatever
+    the reason (zero or -inf opacities, NaN parameters, vanishing scales, a splat in another frame than the
+    cameras); warn when few are seen. A camera over such a splat renders black frames, and a policy trained or
+    evaluated on them says nothing about the scene. -> `splat_visibility`'s counts."""
+    v = splat_visibility(gaussians, cameras)
+    share = v["visible"] / max(v["sampled"], 1)
+    what = (f"{v['visible']} of {v['sampled']} sampled Gaussians are visible from "
+            + (f"{v['cameras']} capture cameras" if v["cameras"] else "anywhere (the scene has no capture cameras)")
+            + f" ({v['nonfinite']} with non-finite parameters, {v['transparent']} with opacity below 1/255, "
+              f"{v['unseen']} outside every view or under 0.5 px)")
+    if share < SPLAT_MIN_SHARE:
+        raise BlankSplatError(f"the camera would render blank frames: {what}; a splat in another frame than the "
+                              "cameras (or up axis), zeroed opacities or scales give this; fix the splat or turn the "
+                              "camera off (env.camera.enabled=false)", path=path)
+    if share < SPLAT_WARN_SHARE:
+        log.warning("%s: only %s; frames will be mostly background", path, what)
+    return v

@@ -14,17 +14,9 @@ import os
 import tempfile
 from pathlib import Path
 
+from wanderland_nav.cache import CACHE_ENV, cache_root  # the one user cache folder of the project
+
 log = logging.getLogger(__name__)
-
-CACHE_ENV = "WANDERLAND_NAV_CACHE"
-
-
-def cache_root() -> Path:
-    """`$WANDERLAND_NAV_CACHE`, else `$XDG_CACHE_HOME/wanderland_nav`, else `~/.cache/wanderland_nav`."""
-    if os.environ.get(CACHE_ENV):
-        return Path(os.environ[CACHE_ENV]).expanduser()
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "wanderland_nav"
-
 
 def writable(folder: Path) -> bool:
     """Whether a file can be created in `folder` (tried, not guessed: permissions, read-only mounts, ACLs)."""
