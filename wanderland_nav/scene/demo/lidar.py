@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import textures
-from .layout import Layout, is_indoor_nav
+from .layout import Layout
 from .raycast import RayCaster
 
 SENSOR_ABOVE_RIG = 0.25  # the LiDAR sits on top of the camera rig
@@ -59,6 +59,6 @@ def scan(caster: RayCaster, layout: Layout, sensor_positions: np.ndarray, patter
     exact = o + t[:, None] * d
     noisy = o + (t + rng.normal(0.0, noise_sigma, len(t)))[:, None] * d
     n = caster.normals[tri]
-    col = textures.shade(layout.face_material[tri], exact, n, np.full(len(t), 0.02), is_indoor_nav(exact), seed,
+    col = textures.shade(layout.face_material[tri], exact, n, np.full(len(t), 0.02), layout.is_indoor(exact), seed,
                          layout.car_color)
     return noisy, np.round(col * 255).astype(np.uint8), exact, tri
