@@ -29,6 +29,10 @@ from .layout import District, build_district
 GENERATOR_VERSION = 1
 MARKER = ".district_scene.json"
 SH_DEGREE = 3
+#: the paper's episode regime on a district (`scene_meta.json` `episode_sampler`, applied by the episode generator):
+#: routes of 5-150 m geodesic over the whole district (the paper's outdoor routes reach >= 100 m) and a share of
+#: sampling rounds drawn inside the buildings, so indoor routes exist beside the long outdoor and mixed ones
+EPISODE_SAMPLER = {"min_geodesic": 5.0, "max_geodesic": 150.0, "indoor_fraction": 0.15, "max_rounds": 400}
 
 SIZES = {
     "small": DemoPreset(image_size=48, frame_spacing=5.0, val_spacing=8.0, scan_spacing=1.2, lidar_rays=700,
@@ -80,6 +84,7 @@ def _build(root: Path, seed: int, size: str, key: str, timings: dict) -> None:
         "up_axis": UP_AXIS,
         "environment": "mixed",
         "indoor_regions": d.layout.indoor_regions,
+        "episode_sampler": EPISODE_SAMPLER,
         "generator": {"name": "wanderland_nav.scene.district", "version": GENERATOR_VERSION, "seed": seed,
                       "size": size, "settings": gen.pop("settings"), "args_hash": key, "sh_degree": SH_DEGREE, **gen,
                       "district": district_summary(d)},
@@ -88,4 +93,5 @@ def _build(root: Path, seed: int, size: str, key: str, timings: dict) -> None:
     atomic_write_json(root / MARKER, {"args_hash": key, "seed": seed, "size": size, "version": GENERATOR_VERSION})
 
 
-__all__ = ["make_district", "SIZES", "MARKER", "GENERATOR_VERSION", "build_district", "district_summary"]
+__all__ = ["make_district", "SIZES", "MARKER", "GENERATOR_VERSION", "EPISODE_SAMPLER", "build_district",
+           "district_summary"]
