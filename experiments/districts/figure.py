@@ -1,5 +1,7 @@
-"""Three district seeds side by side: the navmesh from above (coloured by height, islands outlined by colour
-of the largest one), the capture paths, and one capture camera's view under each map.
+"""Three district seeds side by side: the navmesh from above (coloured by height), the street graph (dashed:
+red roads, blue pedestrian streets), the capture cameras (white: training loops, red: the extrapolation paths
+along the streets), the indoor regions (orange) and, under each map, the view of the capture camera marked
+with a star.
 
     python experiments/districts/figure.py --seeds 0 1 2 --root data/scenes/district --out docs/guide/img/districts.png
 
@@ -54,8 +56,13 @@ def draw(ax_map, ax_view, scene, seed: int, view_index: int) -> None:
     cam = scene.cameras[view_index]
     c = cam.world_from_cam[:3, 3] @ R.T
     ax_map.plot([c[0]], [c[1]], marker="*", color="magenta", ms=9)
+    graph = scene.meta["generator"]["district"]["street_graph"]
+    nodes = np.asarray(graph["nodes"])
+    for a, b, kind in graph["edges"]:
+        ax_map.plot(nodes[[a, b], 0], nodes[[a, b], 1], color="#ff9090" if kind == "road" else "#90c0ff", lw=0.8, ls="--")
     isl = sorted(nm.islands, key=lambda i: -i.area)
-    ax_map.set_title(f"seed {seed}: {nm.area:.0f} m$^2$ walkable, {len(isl)} island(s)", fontsize=9)
+    ax_map.set_title(f"seed {seed}: {nm.area:.0f} m$^2$ walkable, {len(isl)} island(s), {len(graph['edges'])} street "
+                     "segments", fontsize=9)
     ax_map.set_aspect("equal")
     ax_map.autoscale_view()
     ax_map.set_xticks([])
@@ -76,7 +83,7 @@ def main() -> None:
     ap.add_argument("--view", type=int, default=40, help="index of the capture camera shown under each map")
     a = ap.parse_args()
     n = len(a.seeds)
-    fig, axes = plt.subplots(2, n, figsize=(4.2 * n, 6.4), gridspec_kw={"height_ratios": [1.25, 1]})
+    fig, axes = plt.subplots(2, n, figsize=(4.4 * n, 7.2), gridspec_kw={"height_ratios": [1.0, 1.0]}, layout="constrained")
     axes = np.asarray(axes).reshape(2, n)
     pc = None
     for k, seed in enumerate(a.seeds):

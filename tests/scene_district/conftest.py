@@ -1,4 +1,4 @@
-"""One small district, built, prepared and given episodes once per test session."""
+"""One small district, built, prepared and given episodes once per pytest run (session-scoped fixtures)."""
 
 from __future__ import annotations
 

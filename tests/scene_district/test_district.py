@@ -15,7 +15,7 @@ from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.district import EPISODE_SAMPLER, MARKER, SIZES, build_district, make_district
 from wanderland_nav.scene.pointcloud import read_ply_points
 
-SEED = 3  # the seed of the session district (conftest.py)
+SEED = 3  # the seed of the shared district fixture (conftest.py)
 
 
 def _digests(root: Path) -> dict[str, str]:
