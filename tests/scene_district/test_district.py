@@ -141,3 +141,21 @@ def test_district_configs_key_folders_and_split_seeds():
         ("district", "small", s) for s in test.demo["seeds"]]
     with pytest.raises(ValueError, match="generator"):
         typed_config(compose_config("prepare", ["scene=district", "scene.generator=city"]), PrepareConfig)
+
+
+def test_blocked_lidar_and_chunked_shading_change_no_byte(monkeypatch):
+    """The paper size casts its LiDAR a block of scans at a time and shades in chunks (memory); both only
+    regroup per-ray work, so any block size gives the same cloud."""
+    from wanderland_nav.scene.demo import lidar, textures
+    from wanderland_nav.scene.demo.layout import build_layout
+    from wanderland_nav.scene.demo.raycast import RayCaster
+
+    lay = build_layout(0)
+    caster = RayCaster(lay.vertices, lay.faces)
+    sensors = np.array([[x, -9.0, 1.9] for x in np.linspace(-20.0, 20.0, 9)])
+    ref = lidar.scan(caster, lay, sensors, lidar.ScanPattern(rays=300), 20.0, 0.01, seed=1)
+    monkeypatch.setattr(lidar, "CAST_BLOCK_RAYS", 700)
+    monkeypatch.setattr(textures, "SHADE_CHUNK", 257)
+    out = lidar.scan(caster, lay, sensors, lidar.ScanPattern(rays=300), 20.0, 0.01, seed=1)
+    for a, b in zip(ref, out):
+        np.testing.assert_array_equal(a, b)

@@ -123,6 +123,9 @@ def write_capture(root: Path, layout: Layout, paths, p: DemoPreset, seed: int, t
     split = rig.split[frame]
     rgb, depth, mask, seen_img = views.render_views(caster, layout, T_nav, K, p.image_size, p.image_size, seed)
     lap("images")
+    _write_images(root, names, rgb, depth, mask)
+    del rgb, depth, mask  # the views are on disk: not held through the LiDAR and splat stages
+    lap("write_images")
     scans = [capture.sample_path(path, p.scan_spacing, layout.walk_height)[0] for path in paths]
     sensors = np.concatenate(scans) + np.array([0.0, 0.0, lidar.SENSOR_ABOVE_RIG])
     pattern = lidar.ScanPattern(rays=p.lidar_rays)
@@ -134,8 +137,6 @@ def write_capture(root: Path, layout: Layout, paths, p: DemoPreset, seed: int, t
     T_scene = np.tile(np.eye(4), (len(T_nav), 1, 1))
     T_scene[:, :3, :3] = S @ T_nav[:, :3, :3]
     T_scene[:, :3, 3] = T_nav[:, :3, 3] @ S.T
-    _write_images(root, names, rgb, depth, mask)
-    lap("write_images")
     _write_colmap(root, names, split, T_scene, K, p, xyz @ S.T, col)
     for s in ("train", "val"):
         atomic_write_text(root / "nvs_split" / f"{s}.txt", "".join(n + "\n" for n, sp_ in zip(names, split) if sp_ == s))

@@ -223,8 +223,16 @@ def lighting(n: np.ndarray, indoor: np.ndarray) -> np.ndarray:
     return np.where(indoor, INDOOR_LIGHT, sun)
 
 
+SHADE_CHUNK = 1 << 20  # points shaded at once: every step is per point, so chunks only bound the temporaries
+
+
 def shade(material, p, n, fw, indoor, seed: int, car_color) -> np.ndarray:
-    """Final linear colour `[N, 3]` in [0, 1]: albedo times lighting."""
+    """Final linear colour `[N, 3]` in [0, 1]: albedo times lighting (in chunks of `SHADE_CHUNK` points)."""
+    N = len(material)
+    if N > SHADE_CHUNK:
+        return np.concatenate([shade(material[a:a + SHADE_CHUNK], p[a:a + SHADE_CHUNK], n[a:a + SHADE_CHUNK],
+                                     fw[a:a + SHADE_CHUNK], indoor[a:a + SHADE_CHUNK], seed, car_color)
+                               for a in range(0, N, SHADE_CHUNK)])
     return np.clip(albedo(material, p, n, fw, seed, car_color) * lighting(n, indoor)[:, None], 0.0, 1.0)
 
 
