@@ -105,6 +105,8 @@ def write_capture(root: Path, layout: Layout, paths, p: DemoPreset, seed: int, t
     `scene_meta.json` into `root`. Returns the `generator` block's common fields for `scene_meta.json`
     (counts, frame and file conventions). `sh_degree` > 0 writes that many SH bands (all zero beyond the
     DC term: the shading is view-independent, so that is the exact fit)."""
+    if layout.walk_height is None:
+        raise ValueError("write_capture: the layout has no walk_height (the walked surface the rig follows)")
     S = scene_from_nav()
     clock = time.perf_counter()
 
