@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..demo.capture import CapturePath
-from ..demo.layout import DOOR_H, Builder, Layout, M, bench, car, planter, pole, tree, wall_x, wall_y
+from ..demo.layout import Builder, Layout, M, bench, car, planter, pole, tree, wall_x, wall_y
 
 ROAD_W = 6.5
 SIDEWALK_W = 3.0
@@ -121,7 +121,8 @@ WORLD = Frame(0.0, 0.0, 0)
 def emit_cells(b: Builder, rects, bounds) -> list:
     """Ground made of overlapping rectangles `(x0, x1, y0, y1, priority, material | None, z)`: the plane is cut
     on every rectangle edge, each cell takes the highest-priority rectangle over it (None: left open) and runs
-    of equal cells along x become one quad. Returns `[(x0, x1, y0, y1, priority)]` of the emitted runs."""
+    of equal cells along x become one quad. Returns the cells' winning rectangle `[ny, nx]` (-1: none) and the
+    cut positions `xs [nx + 1]`, `ys [ny + 1]`."""
     bx0, bx1, by0, by1 = bounds
     xs = np.unique(np.clip([bx0, bx1, *[r[k] for r in rects for k in (0, 1)]], bx0, bx1))
     ys = np.unique(np.clip([by0, by1, *[r[k] for r in rects for k in (2, 3)]], by0, by1))
@@ -132,7 +133,6 @@ def emit_cells(b: Builder, rects, bounds) -> list:
     cover = iny[:, :, None] & inx[:, None, :]  # [K, ny, nx]
     prio = np.where(cover, R[:, 4, None, None], -np.inf)
     winner = np.where(np.isfinite(prio.max(0)), prio.argmax(0), -1)  # [ny, nx] index into rects
-    runs = []
     for j in range(len(cy)):
         row = winner[j]
         i = 0
@@ -143,7 +143,6 @@ def emit_cells(b: Builder, rects, bounds) -> list:
             r = rects[row[i]] if row[i] >= 0 else None
             if r is not None and r[5] is not None:
                 b.rect(xs[i], xs[k + 1], ys[j], ys[j + 1], r[6], M[r[5]])
-                runs.append((xs[i], xs[k + 1], ys[j], ys[j + 1], r[4]))
             i = k + 1
     return winner, xs, ys
 
@@ -180,11 +179,7 @@ def _positions(rng, length: float, n: int) -> list[float]:
     """`n` street centre lines along `length`, every block between them at least MIN_BLOCK deep."""
     free = length - n * CORRIDOR - (n + 1) * MIN_BLOCK
     cuts = np.sort(rng.uniform(0, free, n))
-    out, at = [], 0.0
-    for k in range(n):
-        at_k = MIN_BLOCK * (k + 1) + CORRIDOR * k + cuts[k] + CORRIDOR / 2
-        out.append(float(at_k))
-    return out
+    return [float(MIN_BLOCK * (k + 1) + CORRIDOR * k + cuts[k] + CORRIDOR / 2) for k in range(n)]
 
 
 def plan_streets(rng: np.random.Generator) -> Plan:
@@ -382,7 +377,7 @@ def _building_shell(b: Builder, fp, z0, top, storeys_mat="facade"):
     b.box((x0, y0, z0), (x1, y1, top), M[storeys_mat], mats={"+z": M["concrete"]})
 
 
-def _forecourt(b: Builder, hf: HeightField, fr: Frame, w, d, holes, material="paving"):
+def _forecourt(b: Builder, w, d, holes, material="paving"):
     rects = [(0.0, w, 0.0, d, 1, material, BASE)] + [(*h, 5, None, BASE) for h in holes]
     emit_cells(b, rects, (0.0, w, 0.0, d))
 
@@ -408,7 +403,7 @@ def _enterable(b: Builder, hf: HeightField, fr: Frame, w, d, edge, rng, clear_ou
             (inner[1], inner[2]), (cx, inner[2])]
     clear = _Clear([path, *clear_outer])
     # floor: forecourt paving around, lobby floor inside
-    _forecourt(b, hf, fr, w, d, [(bx0, bx1, by0, by1)])
+    _forecourt(b, w, d, [(bx0, bx1, by0, by1)])
     b.rect(bx0, bx1, by0, by1, BASE, M["lobby_floor"])
     z0 = BASE
     if side == "back":
@@ -519,7 +514,7 @@ def _plaza(b: Builder, hf, fr, w, d, edge, rng, clear_outer) -> BlockResult | No
     lawn = (t1[0] + 1.0, t1[0] + 1.0 + min(10.0, 0.4 * (t1[1] - t1[0])), t1[3] - 5.0, t1[3] - 1.0)
     if not two and lawn[3] > t1[2] + 1.0:
         top_rects.append((*lawn, 2, "grass"))
-    _forecourt(b, hf, fr, w, d, [t1])
+    _forecourt(b, w, d, [t1])
     _terrace(b, hf, fr, t1, BASE, z1, [ramp1, stairs1], top_rects)
     _ramp(b, hf, fr, *ramp1, f - L1, f, BASE, z1)
     _stairs(b, hf, fr, *stairs1, f, BASE, z1)
@@ -576,7 +571,7 @@ def _closed(b: Builder, hf, fr, w, d, edge, rng, clear_outer) -> BlockResult:
     m = _margins(edge, float(rng.uniform(1.0, 4.0)))
     front = float(rng.uniform(3.0, 6.0))
     fp = (m["left"], w - m["right"], front, d - m["back"])
-    _forecourt(b, hf, fr, w, d, [fp])
+    _forecourt(b, w, d, [fp])
     _building_shell(b, fp, BASE, BASE + float(rng.uniform(8.0, 22.0)), "facade" if rng.random() < 0.7 else "brick")
     clear = _Clear(list(clear_outer))
     taken = []
