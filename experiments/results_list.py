@@ -33,7 +33,7 @@ BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 HEADLINE = re.compile(r"<!-- headline: (?P<label>[^|>]+?)(?: \| stale: (?P<stale>[^>]+?))? -->\n(?P<text>.*?)\n"
                       r"<!-- /headline -->", re.S)
 # the order a reader meets the studies in: the product first, the machinery after
-ORDER = ["train", "benchmark", "released_models", "geometry_grounding", "pedestrians", "real_streets", "env", "render", "navmesh",
+ORDER = ["train", "benchmark", "districts", "released_models", "geometry_grounding", "pedestrians", "real_streets", "env", "render", "navmesh",
          "recon", "scale", "collision_mesh", "demo_scene", "expert_episodes", "gsfit_depth_ablation", "viz",
          "prepare_verify"]
 README_ROWS = 10  # the README stays short; docs/results.md lists every headline

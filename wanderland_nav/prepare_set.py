@@ -30,7 +30,7 @@ import torch
 from planners import NavMesh, NavMeshSettings
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-from wanderland_nav.scene import make_demo_scene
+from wanderland_nav.scene.generated import make_generated_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.sets import SceneSet
 from wanderland_nav.scene_preparation import input_digests, prepare_scene, scene_inputs
@@ -48,11 +48,12 @@ class SceneJob:
     num_episodes: int = 100
     seed: int = 0
     demo_seed: int | None = None  # a procedural demo scene to build first
-    demo_preset: str = "tiny"
+    demo_preset: str = "tiny"  # its preset (a district: its size)
     generator: GeneratorSettings | None = GeneratorSettings()  # expert episodes with these; None: prepare only
     collision: CollisionSettings = CollisionSettings()  # the composed `navigation` group's settings
     navmesh: NavMeshSettings | None = None  # null: NavMeshSettings() (up axis: the scene's)
     force: bool = False  # redo (and rewrite) even when the done-manifest or the artefacts' hashes say done
+    demo_generator: str = "demo"  # the procedural generator of `demo_seed`: demo | district
 
     @property
     def expert(self) -> bool:
@@ -60,13 +61,21 @@ class SceneJob:
 
     def settings_hash(self) -> str:
         """Every setting of the job: a scene done with the same hash is skipped."""
-        return _digest({k: v for k, v in asdict(self).items() if k not in ("scene_id", "path", "force")})
+        return _digest({k: v for k, v in self._hashed().items() if k not in ("scene_id", "path", "force")})
 
     def prepare_hash(self) -> str:
         """The settings of the preparation alone: a prepare-only job (`expert=False`, the scene already
         has episodes) is also covered by an earlier full job with the same preparation."""
         keep = ("demo_seed", "demo_preset", "collision", "navmesh")
-        return _digest({k: v for k, v in asdict(self).items() if k in keep})
+        return _digest({k: v for k, v in self._hashed().items() if k in keep})
+
+    def _hashed(self) -> dict:
+        """The fields the hashes cover; the generator only when it is not the demo (so a demo set's done-manifest
+        written before districts existed still covers it)."""
+        d = asdict(self)
+        if d["demo_generator"] == "demo":
+            d.pop("demo_generator")
+        return d
 
     def inputs_hash(self) -> str:
         """The contents of the scene folder's inputs (scans, poses, meta); "demo" for a demo seed, whose
@@ -93,7 +102,7 @@ def prepare_one(job: SceneJob) -> dict:
     torch.set_num_threads(1)  # one task per core: no oversubscription
     t0 = time.perf_counter()
     if job.demo_seed is not None:
-        make_demo_scene(Path(job.path), seed=job.demo_seed, preset=job.demo_preset)
+        make_generated_scene(Path(job.path), job.demo_generator, job.demo_seed, job.demo_preset)
     scene = prepare_scene(job.path, collision=job.collision, navmesh=job.navmesh, force=job.force)
     out = {"prepare_s": time.perf_counter() - t0}
     if job.expert:
@@ -130,7 +139,8 @@ def jobs_for(scene_set: SceneSet, *, num_episodes: int = 100, seed: int = 0,
     """One job per scene of the set (demo seeds are built first); `generator=None`: prepare only."""
     seeds = scene_set.demo.get("seeds") or [None] * len(scene_set)
     return [SceneJob(e.scene_id, str(e.path), num_episodes, seed, s, scene_set.demo.get("preset", "tiny"), generator,
-                     collision, navmesh, force) for e, s in zip(scene_set.entries, seeds)]
+                     collision, navmesh, force, scene_set.demo.get("generator", "demo"))
+            for e, s in zip(scene_set.entries, seeds)]
 
 
 def _read_manifest(path: Path) -> dict:

@@ -90,7 +90,7 @@ def test_missing_manifest_is_named(tmp_path):
 def test_demo_set_config_names_three_seeds(tmp_path):
     cfg = OmegaConf.load("conf/scene/demo_set.yaml")
     s = scene_set_from_config(cfg)
-    assert s.ids == ["demo_seed_0", "demo_seed_1", "demo_seed_2"] and s.demo == {"seeds": [0, 1, 2], "preset": "tiny"}
+    assert s.ids == ["demo_seed_0", "demo_seed_1", "demo_seed_2"] and s.demo == {"seeds": [0, 1, 2], "preset": "tiny", "generator": "demo"}
     assert cfg.path == str(s.paths[0])  # named in the refusal message of single-scene commands
     assert scene_set_from_config(OmegaConf.load("conf/scene/demo.yaml")) is None
     d = demo_scene_set(tmp_path, seeds=[4])

@@ -12,7 +12,7 @@ from pathlib import Path
 from planners import NavMesh
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
 from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
-from wanderland_nav.scene import load_scene, make_demo_scene
+from wanderland_nav.scene import load_scene, make_demo_scene, make_generated_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
 from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
 
@@ -21,10 +21,10 @@ log = logging.getLogger(__name__)
 
 def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
                  navigation: NavigationGroup | None = None) -> Path:
-    """Where the scene lives; the demo is made there on first use (idempotent). A non-default demo
-    preset gets its own folder beside the default one (`<path>_<preset>`), and so do `navigation` settings
-    other than the default ones (`<path>_<preset>_nav<hash8>`): the demo's collision mesh, navmesh and episodes
-    are products of those settings, so `debug=smoke` (coarser voxels) and the main job each keep their own
+    """Where the scene lives; the demo (or a district, `scene.generator`) is made there on first use (idempotent). A
+    non-default demo preset gets its own folder beside the default one (`<path>_<preset>`), and so do `navigation`
+    settings other than the default ones (`<path>_nav<hash8>`): a generated scene's collision mesh, navmesh and
+    episodes are products of those settings, so `debug=smoke` (coarser voxels) and the main job each keep their own
     beside the other instead of re-baking one folder in turn. A scene set is refused: the commands that take
     one scene never quietly use a set's first scene."""
     if scene.set is not None:
@@ -32,7 +32,13 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
                          f"(one of the set's, e.g. scene={scene.path}). prepare, make_episodes, train and evaluate "
                          "take sets")
     path = Path(scene.path)
-    if scene.demo:
+    if scene.demo and scene.generator != "demo":  # a district: its folder is keyed by seed and size (conf/scene)
+        path = Path(f"{path}{navigation_tag(navigation)}")
+        t = time.perf_counter()
+        make_generated_scene(path, scene.generator, seed=scene.seed, preset=scene.size)
+        log.info("%s scene (seed %d, %s) ready at %s (%.1fs)", scene.generator, scene.seed, scene.size, path,
+                 time.perf_counter() - t)
+    elif scene.demo:
         preset = demo_preset or scene.preset
         path = path if preset == "default" else Path(f"{path}_{preset}")
         path = Path(f"{path}{navigation_tag(navigation)}")

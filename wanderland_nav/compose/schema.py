@@ -66,6 +66,15 @@ def _check_ranges(obj, prefix: str = "") -> None:
 
 
 # ------------------------------------------------------------------------------ shared groups
+def _check_generator(where: str, generator: str, size: str) -> None:
+    from wanderland_nav.scene.generated import GENERATORS
+
+    if generator not in GENERATORS:
+        raise ValueError(f"{where}.generator={generator!r}: expected one of {list(GENERATORS)}")
+    if size not in ("small", "paper"):
+        raise ValueError(f"{where}.size={size!r}: expected small or paper")
+
+
 @dataclass
 class SceneSetSettings:
     """`scene.set` (`conf/scene/demo_set.yaml`): many scenes trained on together and evaluated per scene.
@@ -74,6 +83,9 @@ class SceneSetSettings:
     root: Optional[str] = None  # where the demo seeds are built and prepare_done.json lives (null: manifest's folder)
     seeds: Optional[List[int]] = None  # procedural demo seeds (then `manifest` is ignored)
     preset: str = "tiny"  # demo seeds only
+    generator: str = "demo"  # the seeds' generator: demo | district (conf/scene/district_set.yaml)
+    size: str = "small"  # district seeds only: small | paper
+    seed_splits: Optional[Dict[str, List[int]]] = None  # {train|val|test: seeds}: each seed's split (null: train)
     manifest: Optional[str] = None
     data_root: Optional[str] = None  # list/CSV paths resolve against it (null: the manifest's folder)
     tiers: Optional[List[str]] = None  # CSV quality tiers kept (null: all)
@@ -86,6 +98,7 @@ class SceneSetSettings:
     def __post_init__(self):
         if self.backend not in ("process", "ray", "auto", "serial"):
             raise ValueError(f"scene.set.backend={self.backend!r}: expected process, ray, auto or serial")
+        _check_generator("scene.set", self.generator, self.size)
 
 
 @dataclass
@@ -95,10 +108,15 @@ class SceneGroup:
     name: str = "demo"
     path: str = "data/scenes/demo"
     demo: bool = True  # the procedural demo (`conf/scene/demo.yaml`); a folder sets false
-    seed: int = 0  # demo only
+    seed: int = 0  # demo / district only
     preset: str = "default"  # demo only: "tiny" | "default"
+    generator: str = "demo"  # with `demo: true`, the procedural generator: demo (the block) | district
+    size: str = "small"  # district only: "small" | "paper"
     up_axis: Optional[str] = None  # null: the scene's own (scene_meta.json, else its layout's convention)
     set: Optional[SceneSetSettings] = None  # a scene set (train/evaluate); single-scene entry points use `path`
+
+    def __post_init__(self):
+        _check_generator("scene", self.generator, self.size)
 
 
 def robot_navmesh() -> NavMeshSettings:

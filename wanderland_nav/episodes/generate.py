@@ -44,7 +44,7 @@ from wanderland_nav.render.lod import DEFAULT_LOD_PX
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: every episode carries its environment label and elevation change
 HIST_EDGES = (0, 5, 10, 15, 20, 30, 50, 100, math.inf)  # metres, for the length histogram
 
 
@@ -63,6 +63,9 @@ class GeneratorSettings:
     goal_image_lod_px: float | None = DEFAULT_LOD_PX  # the splat's level of detail for goal views (render/lod.py); None: all
     render_device: str = "cpu"
     decimals: int = 4  # rounding of every written coordinate (0.1 mm)
+    # a scene's `scene_meta.json` may name the sampler fields its episodes use (`episode_sampler`, e.g. a
+    # district's long routes); they replace these `sampler` fields unless this is false
+    scene_sampler: bool = True
 
     def __post_init__(self):
         if self.step_size <= 0:
@@ -76,7 +79,22 @@ class GeneratorSettings:
         d = dataclasses.asdict(self)
         d["splits"] = list(self.splits)
         d.pop("render_device")  # where we render does not change the result
+        if self.scene_sampler:  # recorded only when off: the recorded sampler is the one used
+            d.pop("scene_sampler")
         return d
+
+    def for_scene(self, scene) -> "GeneratorSettings":
+        """These settings with the sampler fields the scene's `scene_meta.json` names (`episode_sampler`) in place
+        of this `sampler`'s, when `scene_sampler` is on; unknown fields are refused with the file named."""
+        over = (getattr(scene, "meta", None) or {}).get("episode_sampler") if self.scene_sampler else None
+        if not over:
+            return self
+        known = {f.name for f in dataclasses.fields(SamplerSettings)}
+        bad = sorted(set(over) - known)
+        if bad:
+            raise WanderlandInputError(f"{getattr(scene, 'root', '?')}/scene_meta.json: episode_sampler: unknown "
+                                       f"field(s) {bad} (known: {sorted(known)})")
+        return dataclasses.replace(self, sampler=dataclasses.replace(self.sampler, **over))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "GeneratorSettings":
@@ -246,18 +264,28 @@ def _instruction_texts(scene, instructions: InstructionGenerator, geo: _RouteGeo
     return texts
 
 
-def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, splits: list[str], rho, phi,
+def environment_label(indoor: np.ndarray) -> str:
+    """"indoor" when every expert location of a route is inside an indoor region, "outdoor" when none is, else
+    "mixed" (the route goes through a door)."""
+    indoor = np.asarray(indoor, dtype=bool)
+    return "indoor" if indoor.all() else "outdoor" if not indoor.any() else "mixed"
+
+
+def _assemble_episodes(scene, pairs, geo: _RouteGeometry, dense, indoor, splits: list[str], rho, phi,
                        goal_paths: list[Path | None], goal_image_base: Path | None, texts: list[str],
-                       dec: int) -> list[Episode]:
+                       dec: int, R_ns: np.ndarray) -> list[Episode]:
     """Build and validate the `Episode` records (every written number rounded to `dec` places)."""
     episodes = []
     for i in range(len(geo.corners)):
+        z = (np.asarray(dense[i]) @ R_ns.T)[:, 2] if len(dense[i]) else np.zeros(1)
         extras: dict[str, Any] = {
             "split": splits[i],
             "up_axis": scene.up_axis,
             "euclidean_distance": round(float(pairs.euclidean[i]), dec),
             "island": int(pairs.island[i]),
             "point_goal_polar": [round(float(rho[i]), dec), round(float(phi[i]), 6)],
+            "environment": environment_label(indoor[i]),
+            "elevation_change": round(float(z.max() - z.min()), 3),  # metres between the route's lowest and highest
         }
         if goal_paths[i] is not None:
             extras["goal_image"] = goal_paths[i].relative_to(goal_image_base).as_posix()
@@ -287,7 +315,7 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     the folder above it) when it is given and `settings.goal_images` is on. `progress(n)` is called as episodes are accepted.
     Returns fewer episodes than asked if the sampler runs out of rounds (the summary says why).
     """
-    settings = settings or GeneratorSettings()
+    settings = (settings or GeneratorSettings()).for_scene(scene)
     instructions = instructions or RuleBasedInstructions()
     if num_episodes < 0:
         raise ValueError(f"num_episodes must be >= 0, got {num_episodes}")
@@ -295,7 +323,9 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     # the draws from `rng` are, in this order: endpoint sampling, then the split permutation
     rng = np.random.default_rng(seed)
     R_ns = np.asarray(scene.nav_from_scene, dtype=np.float64)  # [3, 3]
-    sampler = EndpointSampler(navmesh, scene.capture_positions(), R_ns, settings.sampler)
+    cams = scene.capture_positions()
+    sampler = EndpointSampler(navmesh, cams, R_ns, settings.sampler,
+                              camera_indoor=scene.is_indoor(cams) if settings.sampler.indoor_fraction > 0 else None)
     pairs = sampler.sample(num_episodes, rng, progress=progress)
     E = len(pairs.starts)
 
@@ -312,8 +342,8 @@ def generate_episodes(scene, navmesh, *, num_episodes: int, seed: int,
     texts = _instruction_texts(scene, instructions, geo, dense, indoor, R_ns, goal_paths, seed)
     base = Path(goal_image_base) if goal_image_base is not None else \
         Path(goal_image_dir).parent if goal_image_dir is not None else None
-    episodes = _assemble_episodes(scene, pairs, geo, dense, splits, rho, phi, goal_paths, base,
-                                  texts, settings.decimals)
+    episodes = _assemble_episodes(scene, pairs, geo, dense, indoor, splits, rho, phi, goal_paths, base,
+                                  texts, settings.decimals, R_ns)
 
     rej = {r: int(pairs.rejections.get(r, 0)) for r in REJECTION_REASONS}
     summary = GenerationSummary(
@@ -566,7 +596,7 @@ def write_scene_episodes(scene, navmesh, out: Path, *, num_episodes: int, seed: 
     `episodes.generated.json` beside it, goal images to `goal_images.generated/`, and
     `summary.out` (also logged) names the file used.
     """
-    settings = settings or GeneratorSettings()
+    settings = (settings or GeneratorSettings()).for_scene(scene)
     instructions = instructions or RuleBasedInstructions()
     requested = Path(out)
     out = episodes_target(requested, force=force)

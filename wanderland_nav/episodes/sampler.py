@@ -52,6 +52,9 @@ class SamplerSettings:
     path_tolerance: float = 0.05  # relative |find_path length - geodesic_distance| accepted (+ 0.1 m)
     batch_size: int = 256  # candidate pairs per round
     max_rounds: int = 200  # give up (and report) after this many rounds
+    # share of rounds whose starts and goals are all drawn around cameras inside an indoor region (the scene's
+    # `indoor_regions`): routes inside buildings, which pairs drawn over a whole district would rarely give
+    indoor_fraction: float = 0.0
 
     def __post_init__(self):
         checks = {
@@ -62,6 +65,7 @@ class SamplerSettings:
             "goal_radius_fraction": self.goal_radius_fraction > 0,
             "min_goal_radius": 0 < self.min_goal_radius <= self.goal_radius,
             "path_tolerance": self.path_tolerance >= 0, "batch_size": self.batch_size > 0, "max_rounds": self.max_rounds > 0,
+            "indoor_fraction": 0.0 <= self.indoor_fraction <= 1.0,
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -91,7 +95,8 @@ class SampledPairs:
 class EndpointSampler:
     """Draws start/goal pairs near capture cameras on one navmesh (see module docstring)."""
 
-    def __init__(self, navmesh, camera_centers: np.ndarray, nav_from_scene: np.ndarray, settings: SamplerSettings):
+    def __init__(self, navmesh, camera_centers: np.ndarray, nav_from_scene: np.ndarray, settings: SamplerSettings,
+                 camera_indoor: np.ndarray | None = None):
         self.navmesh = navmesh
         self.s = settings
         self.R_ns = np.asarray(nav_from_scene, dtype=np.float64)  # [3, 3]
@@ -115,6 +120,8 @@ class EndpointSampler:
                 f"EndpointSampler: no capture camera has navigable ground within {self.s.camera_radius} m "
                 f"horizontally and {self.s.camera_max_drop} m below it; is the up axis right?")
         self.usable = np.flatnonzero(ok)  # [M'] camera indices used as sampling centres
+        indoor = np.zeros(len(cams), bool) if camera_indoor is None else np.asarray(camera_indoor, bool).reshape(-1)
+        self.usable_indoor = self.usable[indoor[self.usable]]  # the centres of indoor rounds
         self.ground_nav = ground  # [M, 3]
         self.camera_heights = drop[ok]  # [M'] camera height above the navmesh (for goal images)
 
@@ -145,15 +152,18 @@ class EndpointSampler:
             out[i:i + chunk] = ((d2 <= r2) & (dz <= self.s.camera_max_drop)).any(-1)
         return out
 
-    def draw_points(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Points drawn uniformly in discs around random usable cameras, put on the navmesh.
+    def draw_points(self, n: int, rng: np.random.Generator, centres: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Points drawn uniformly in discs around random usable cameras (of `centres`, default all usable ones),
+        put on the navmesh.
 
         Returns `[n, 3]` scene-frame snapped points and `bool [n]` "on mesh": the drawn ground
         point was over the navmesh (snapping moved it < 5 cm sideways) and the planner calls the
         snapped point navigable. Off-mesh draws are rejected rather than kept on the navmesh edge,
         so starts and goals are uniform over the walkable area and never pressed against a wall.
         """
-        cam = self.usable[rng.integers(len(self.usable), size=n)]
+        centres = self.usable if centres is None else centres
+        cam = centres[rng.integers(len(centres), size=n)]
         rad = self.s.camera_radius * np.sqrt(rng.random(n))
         ang = rng.random(n) * 2 * np.pi
         p = self.ground_nav[cam].copy()
@@ -173,13 +183,14 @@ class EndpointSampler:
 
     # ----------------------------------------------------------------- main loop
 
-    def _round(self, K: int, rng: np.random.Generator, rej: Counter):
-        """One round of `K` candidate pairs through every batched filter (rejections counted in `rej`).
+    def _round(self, K: int, rng: np.random.Generator, rej: Counter, centres: np.ndarray | None = None):
+        """One round of `K` candidate pairs (drawn around `centres`, default every usable camera) through every
+        batched filter (rejections counted in `rej`).
 
         -> None when none survives, else (starts `[K, 3]`, goals `[K, 3]`, start islands `[K]`,
         euclidean `[K]`, geodesic `[K]`, goal radius `[K]`, surviving indices `[n]`)."""
         s = self.s
-        pts, on = self.draw_points(2 * K, rng)  # [2K, 3], [2K]
+        pts, on = self.draw_points(2 * K, rng, centres)  # [2K, 3], [2K]
         keep_u = rng.random(K)  # drawn every round so the stream does not depend on filters
         pick_u = rng.random(K)
         near = self.near_camera(pts) & on
@@ -246,14 +257,12 @@ class EndpointSampler:
         acc_s_nav = np.zeros((0, 3))
         acc_g_nav = np.zeros((0, 3))
         drawn = rounds = 0
-        while len(acc_s) < num and rounds < s.max_rounds:
-            rounds += 1
-            # a round costs one batched planner call over its pairs: draw fewer near the end
-            K = min(s.batch_size, max(32, 16 * (num - len(acc_s))))
-            drawn += K
-            survivors = self._round(K, rng, rej)
+
+        def accept(survivors) -> None:
+            """Minimum separation and the expert path for one round's survivors, in draw order."""
+            nonlocal acc_s_nav, acc_g_nav
             if survivors is None:
-                continue
+                return
             st, go, isl_s, euc, geo, radius, cand = survivors
             # minimum separation: against everything accepted so far (vectorised), then greedily
             # inside this round's survivors (few), in draw order so the result is deterministic.
@@ -285,6 +294,17 @@ class EndpointSampler:
                 acc_g_nav = np.vstack([acc_g_nav, go_nav[j]])
                 if progress is not None:
                     progress(1)
+
+        while len(acc_s) < num and rounds < s.max_rounds:
+            rounds += 1
+            # a round costs one batched planner call over its pairs: draw fewer near the end
+            K = min(s.batch_size, max(32, 16 * (num - len(acc_s))))
+            drawn += K
+            # `indoor_fraction` of the pairs drawn around indoor cameras only (none: the stream is as without it)
+            K_in = int(round(s.indoor_fraction * K)) if len(self.usable_indoor) else 0
+            for k, centres in ((K_in, self.usable_indoor), (K - K_in, None)):
+                if k > 0 and len(acc_s) < num:
+                    accept(self._round(k, rng, rej, centres))
         E = len(acc_s)
         return SampledPairs(
             starts=np.asarray(acc_s, dtype=np.float64).reshape(E, 3),

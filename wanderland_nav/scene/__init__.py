@@ -1,6 +1,6 @@
-"""Scenes: the `Scene` model, Wanderland v1/v2 loader, COLMAP/PLY readers, demo scene, collision mesh.
+"""Scenes: the `Scene` model, Wanderland v1/v2 loader, COLMAP/PLY readers, demo scene, districts, collision mesh.
 
-`from wanderland_nav.scene import Scene, Camera, load_scene, make_demo_scene, extract_collision_mesh`.
+`from wanderland_nav.scene import Scene, Camera, load_scene, make_demo_scene, make_district, extract_collision_mesh`.
 Names are resolved lazily so that importing one reader (e.g. `scene.colmap`) does not pull in
 trimesh / scikit-image, and so the demo generator (its own sub-package) loads only when asked for.
 """
@@ -15,6 +15,8 @@ _EXPORTS = {
     "SceneFormatError": "wanderland_nav.scene.types",
     "load_scene": "wanderland_nav.scene.loader",
     "make_demo_scene": "wanderland_nav.scene.demo",
+    "make_district": "wanderland_nav.scene.district",
+    "make_generated_scene": "wanderland_nav.scene.generated",
     "extract_collision_mesh": "wanderland_nav.scene.collision",
     "CollisionSettings": "wanderland_nav.scene.collision",
 }

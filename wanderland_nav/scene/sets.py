@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
-from wanderland_nav.scene import make_demo_scene
+from wanderland_nav.scene.generated import make_generated_scene
 
 TIERS = ("showcase", "evaluation_ready", "training_ready")
 SCENE_MARKERS = ("3dgs.ply", "sparse", "scene.ply", "raw_pcd.ply", "transforms.json", "lidar")
@@ -70,7 +70,7 @@ class SceneSet:
         tiers = None if tiers is None else set(_check_tiers(tiers, self.source))
         kept = [e for e in self.entries
                 if (tiers is None or e.quality_tier in tiers) and (split is None or e.split == split)]
-        return replace(self, entries=kept)
+        return self._kept(kept)
 
     def restrict(self, ids: Sequence[str]) -> "SceneSet":
         """The scenes named in `ids` (e.g. a split list), in this set's order; unknown ids raise."""
@@ -78,7 +78,15 @@ class SceneSet:
         if unknown:
             raise ManifestError(f"{self.source}: scene ids not in the set: {unknown[:5]}")
         wanted = set(ids)
-        return replace(self, entries=[e for e in self.entries if e.scene_id in wanted])
+        return self._kept([e for e in self.entries if e.scene_id in wanted])
+
+    def _kept(self, kept: list[SceneEntry]) -> "SceneSet":
+        """This set with the entries `kept` only, a procedural set's seeds kept in step with them."""
+        demo = self.demo
+        if demo.get("seeds"):
+            seed_of = dict(zip(self.ids, demo["seeds"]))
+            demo = {**demo, "seeds": [seed_of[e.scene_id] for e in kept]}
+        return replace(self, entries=kept, demo=demo)
 
     def missing(self) -> list[SceneEntry]:
         return [e for e in self.entries if not e.path.is_dir()]
@@ -180,17 +188,32 @@ def load_scene_set(source: str | Path, *, data_root: str | Path | None = None, t
     return s.filter(tiers=tiers, split=split) if (tiers is not None or split is not None) else s
 
 
-def demo_scene_set(root: str | Path, seeds: Sequence[int] = (0, 1, 2), preset: str = "tiny") -> SceneSet:
-    """The procedural block at several seeds, `root/seed_<k>`; built on demand by `build_demo_scenes`."""
+def demo_scene_set(root: str | Path, seeds: Sequence[int] = (0, 1, 2), preset: str = "tiny", *,
+                   generator: str = "demo", seed_splits: dict | None = None) -> SceneSet:
+    """A procedural generator's scenes at several seeds, `root/seed_<k>` (the demo block at `preset`, or districts
+    with `generator="district"` and `preset` their size); built on demand by `build_demo_scenes`. `seed_splits`
+    (`{split: [seeds]}`) gives each seed its split (default train); a seed in two splits is refused."""
     root = Path(root)
-    entries = [SceneEntry(f"demo_seed_{int(k)}", root / f"seed_{int(k)}", split="train") for k in seeds]
-    return SceneSet(entries, source=f"demo set {root}", demo={"seeds": [int(k) for k in seeds], "preset": preset})
+    split_of: dict[int, str] = {}
+    for split, ks in (seed_splits or {}).items():
+        for k in ks:
+            if int(k) in split_of:
+                raise ManifestError(f"scene.set.seed_splits: seed {k} is in both {split_of[int(k)]} and {split}")
+            split_of[int(k)] = str(split)
+    extra = sorted(set(split_of) - {int(k) for k in seeds})
+    if extra:
+        raise ManifestError(f"scene.set.seed_splits: seeds {extra} are not in scene.set.seeds")
+    prefix = "demo" if generator == "demo" else generator
+    entries = [SceneEntry(f"{prefix}_seed_{int(k)}", root / f"seed_{int(k)}", split=split_of.get(int(k), "train"))
+               for k in seeds]
+    return SceneSet(entries, source=f"{prefix} set {root}",
+                    demo={"seeds": [int(k) for k in seeds], "preset": preset, "generator": generator})
 
 
 def build_demo_scenes(scene_set: SceneSet) -> None:
-    """Make the missing demo scenes of a demo set (idempotent: existing builds return at once)."""
+    """Make the missing scenes of a procedural set (idempotent: existing builds return at once)."""
     for entry, seed in zip(scene_set.entries, scene_set.demo["seeds"]):
-        make_demo_scene(entry.path, seed=seed, preset=scene_set.demo["preset"])
+        make_generated_scene(entry.path, scene_set.demo.get("generator", "demo"), seed, scene_set.demo["preset"])
 
 
 def scene_set_from_config(scene) -> SceneSet | None:
@@ -200,7 +223,10 @@ def scene_set_from_config(scene) -> SceneSet | None:
     if not s:
         return None
     if s.seeds is not None:
-        return demo_scene_set(s.root, s.seeds, s.preset or "tiny")
+        generator = getattr(s, "generator", "demo") or "demo"
+        preset = (getattr(s, "size", None) or "small") if generator == "district" else (s.preset or "tiny")
+        out = demo_scene_set(s.root, s.seeds, preset, generator=generator, seed_splits=getattr(s, "seed_splits", None))
+        return out.filter(split=s.split) if getattr(s, "split", None) else out
     if s.manifest is None:
         raise ManifestError("scene.set: neither `seeds` (demo scenes) nor `manifest` given")
     return load_scene_set(s.manifest, data_root=s.data_root, tiers=s.tiers, split=s.split)

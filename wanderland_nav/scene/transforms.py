@@ -205,7 +205,9 @@ META_SCHEMA: dict[str, tuple[tuple[type, ...], str]] = {
     "lidar_min_range": ((int, float), "metres; returns closer to the sensor are the capture platform"),
     "lidar_max_pose_jump": ((int, float), "metres; consecutive lidar/poses.txt poses further apart are refused"),
     "lidar_splat": ((dict,), "written by the LiDAR splat builder"),
-    "generator": ((dict,), "written by the demo scene generator"),
+    "generator": ((dict,), "written by the procedural scene generators (demo, district)"),
+    "episode_sampler": ((dict,), "episodes.sampler.SamplerSettings fields this scene's episodes use "
+                                 "(unless generator.scene_sampler=false)"),
     "degradation": ((dict,), "written by the degraded-scene builder"),
     "notes": ((str, list, dict), "free-form, never read"),
 }

@@ -51,7 +51,7 @@ class Rig:
     yaw: np.ndarray  # [P] heading about +z, radians
     pitch: np.ndarray  # [P]
     roll: np.ndarray  # [P]
-    path_index: np.ndarray  # [P] index into PATHS
+    path_index: np.ndarray  # [P] index into the paths walked
     split: np.ndarray  # [P] "train" | "val"
 
 
@@ -70,8 +70,9 @@ def _at(pts, cum, s):
     return pts[i] + t[:, None] * (pts[i + 1] - pts[i])
 
 
-def sample_path(path: CapturePath, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions `[K, 3]` (rig height applied), yaw `[K]` every ~`spacing` metres along a path."""
+def sample_path(path: CapturePath, spacing: float, ground_height=walk_height) -> tuple[np.ndarray, np.ndarray]:
+    """Positions `[K, 3]` (rig height applied), yaw `[K]` every ~`spacing` metres along a path;
+    `ground_height(xy [..., 2]) -> [...]` is the walked surface (default: the demo block's)."""
     pts, cum = _polyline(np.asarray(path.waypoints, np.float64), path.closed)
     L = cum[-1]
     if path.closed:
@@ -87,16 +88,17 @@ def sample_path(path: CapturePath, spacing: float) -> tuple[np.ndarray, np.ndarr
     yaw = np.arctan2(d[:, 1], d[:, 0])
     xy = _at(pts, cum, s)
     offs = np.linspace(-0.5, 0.5, 11)  # ground height averaged over 1 m of path
-    ground = walk_height(_at(pts, cum, wrap((s[:, None] + offs[None]).ravel())).reshape(-1, len(offs), 2)).mean(1)
+    ground = ground_height(_at(pts, cum, wrap((s[:, None] + offs[None]).ravel())).reshape(-1, len(offs), 2)).mean(1)
     return np.column_stack([xy, ground + RIG_HEIGHT]), yaw
 
 
-def make_rig(spacing: float, seed: int, val_spacing: float | None = None) -> Rig:
-    """All rig poses: training loops every `spacing` m, val path every `val_spacing` (default = spacing)."""
+def make_rig(spacing: float, seed: int, val_spacing: float | None = None, paths=PATHS, ground_height=walk_height) -> Rig:
+    """All rig poses along `paths` (default: the demo block's): training loops every `spacing` m, val paths every
+    `val_spacing` (default = spacing), at `RIG_HEIGHT` above `ground_height`."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 4242]))
     pos, yaw, idx, split = [], [], [], []
-    for i, p in enumerate(PATHS):
-        x, a = sample_path(p, spacing if p.split == "train" else (val_spacing or spacing))
+    for i, p in enumerate(paths):
+        x, a = sample_path(p, spacing if p.split == "train" else (val_spacing or spacing), ground_height)
         pos.append(x)
         yaw.append(a)
         idx.append(np.full(len(x), i))

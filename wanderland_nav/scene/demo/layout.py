@@ -22,6 +22,7 @@ everything the tests and the capture path rely on, is the same for every seed.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import trimesh
@@ -67,7 +68,20 @@ class Layout:
     faces: np.ndarray  # [F, 3] int64, counter-clockwise seen from outside
     face_material: np.ndarray  # [F] int16 index into textures.MATERIALS
     car_color: np.ndarray  # [3] float, albedo of the car paint (seed dependent)
-    indoor_regions: list[dict] = field(default_factory=list)  # scene_meta.json schema, nav frame
+    indoor_regions: list[dict] = field(default_factory=list)  # scene_meta.json schema, nav frame (rectangles)
+    walk_height: Callable[[np.ndarray], np.ndarray] | None = None  # xy [..., 2] -> ground height [...] (no furniture)
+
+    def is_indoor(self, p: np.ndarray) -> np.ndarray:
+        """`[..., 3]` nav-frame points -> bool `[...]`: inside an indoor region (its polygon's bounding
+        rectangle, bounds included, and z_min <= z <= z_max). The generators write rectangular regions only."""
+        p = np.asarray(p, np.float64)
+        inside = np.zeros(p.shape[:-1], bool)
+        for reg in self.indoor_regions:
+            poly = np.asarray(reg["polygon_xy"], np.float64)
+            lo, hi = poly.min(0), poly.max(0)
+            inside |= ((p[..., 0] >= lo[0]) & (p[..., 0] <= hi[0]) & (p[..., 1] >= lo[1]) & (p[..., 1] <= hi[1])
+                       & (p[..., 2] >= reg["z_min"]) & (p[..., 2] <= reg["z_max"]))
+        return inside
 
     @property
     def face_normals(self) -> np.ndarray:
@@ -114,7 +128,7 @@ def walk_height(xy: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- mesh building
 
 
-class _Builder:
+class Builder:
     """Accumulates oriented triangles with a material id each."""
 
     def __init__(self):
@@ -189,7 +203,7 @@ def rect_minus(rect, holes):
     return out
 
 
-def _wall_x(b: _Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inner_side):
+def wall_x(b: Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inner_side):
     """Wall slab spanning x in [x0, x1] (thin in y) with door openings `doors` = [(a, b)] along x."""
     edges = [x0] + [v for d in doors for v in d] + [x1]
     for a, c in zip(edges[0::2], edges[1::2]):
@@ -199,7 +213,7 @@ def _wall_x(b: _Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inn
         b.box((a, y0, z0 + DOOR_H), (c, y1, z1), material, skip=("-x", "+x", "+z"), mats={inner_side: inner_mat, "-z": M["plaster"]})
 
 
-def _wall_y(b: _Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inner_side):
+def wall_y(b: Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inner_side):
     """Wall slab spanning y in [y0, y1] (thin in x) with door openings along y."""
     edges = [y0] + [v for d in doors for v in d] + [y1]
     for a, c in zip(edges[0::2], edges[1::2]):
@@ -209,7 +223,7 @@ def _wall_y(b: _Builder, x0, x1, y0, y1, z0, z1, doors, material, inner_mat, inn
         b.box((x0, a, z0 + DOOR_H), (x1, c, z1), material, skip=("-y", "+y", "+z"), mats={inner_side: inner_mat, "-z": M["plaster"]})
 
 
-def _tree(b: _Builder, rng, x, y, z):
+def tree(b: Builder, rng, x, y, z):
     b.box((x - 0.15, y - 0.15, z), (x + 0.15, y + 0.15, z + 3.2), M["bark"])
     # tree pit: a soil square flush with the paving (drawn 1 mm above it to win the depth test)
     b.rect(x - 0.7, x + 0.7, y - 0.7, y + 0.7, z + 0.001, M["soil"])
@@ -223,7 +237,7 @@ def _tree(b: _Builder, rng, x, y, z):
     b.add(verts, s.faces, M["foliage"])
 
 
-def _bench(b: _Builder, x, y, z, along_x: bool):
+def bench(b: Builder, x, y, z, along_x: bool):
     L, W = 1.8, 0.5
     hx, hy = (L / 2, W / 2) if along_x else (W / 2, L / 2)
     b.box((x - hx, y - hy, z + 0.42), (x + hx, y + hy, z + 0.48), M["wood"], skip=())
@@ -237,14 +251,14 @@ def _bench(b: _Builder, x, y, z, along_x: bool):
         b.box((x + hx - 0.05, y - hy, z + 0.5), (x + hx, y + hy, z + 0.9), M["wood"], skip=())
 
 
-def _pole(b: _Builder, x, y, z, h=5.5):
+def pole(b: Builder, x, y, z, h=5.5):
     c = trimesh.creation.cylinder(radius=0.07, height=h, sections=10)
     c.apply_translation((x, y, z + h / 2))
     b.trimesh_(c, M["metal"])
     b.box((x - 0.35, y - 0.15, z + h), (x + 0.35, y + 0.15, z + h + 0.18), M["metal"], skip=())
 
 
-def _planter(b: _Builder, x, y, z, rng):
+def planter(b: Builder, x, y, z, rng):
     b.box((x - 0.6, y - 0.6, z), (x + 0.6, y + 0.6, z + 0.6), M["terracotta"], skip=("-z", "+z"))
     b.rect(x - 0.6, x + 0.6, y - 0.6, y + 0.6, z + 0.5, M["soil"])
     s = trimesh.creation.icosphere(subdivisions=1, radius=0.5)
@@ -253,7 +267,7 @@ def _planter(b: _Builder, x, y, z, rng):
     b.trimesh_(s, M["foliage"])
 
 
-def _car(b: _Builder, x0, x1, yc, z):
+def car(b: Builder, x0, x1, yc, z):
     w = 1.8
     b.box((x0, yc - w / 2, z + 0.3), (x1, yc + w / 2, z + 1.0), M["car_paint"], skip=())
     L = x1 - x0
@@ -271,7 +285,7 @@ def _car(b: _Builder, x0, x1, yc, z):
 TREE_X = (-19.0, -6.0, 8.0, 21.0)  # street trees along the sidewalk (pits in the paving)
 
 
-def _ground_levels(b: "_Builder") -> None:
+def _ground_levels(b: "Builder") -> None:
     """Street, kerb, sidewalk, the courtyard level, the plaza, its stairs and ramp."""
     lx0, lx1 = X_LONG
     # ---- street, kerb, sidewalk
@@ -316,16 +330,16 @@ def _ground_levels(b: "_Builder") -> None:
         b.poly([[xs, ry0, SIDEWALK_Z], [xs, ry1, SIDEWALK_Z], [xs, ry1, PLAZA_Z]], [sgn, 0, 0], M["concrete"])
 
 
-def _building(b: "_Builder") -> None:
+def _building(b: "Builder") -> None:
     """The lobby: exterior walls with doorways, partition, pillars, desk, ceiling, upper block."""
     bx0, bx1, by0, by1 = BUILDING
     # ---- building: exterior walls with doorways, partition, pillars, desk, ceiling, upper block
     z0, zt = SIDEWALK_Z, LOBBY_TOP
-    _wall_x(b, bx0, bx1, by0, by0 + WALL_T, z0, zt, SOUTH_DOORS, M["brick"], M["plaster"], "+y")
-    _wall_x(b, bx0, bx1, by1 - WALL_T, by1, z0, zt, [], M["brick"], M["plaster"], "-y")
-    _wall_y(b, bx0, bx0 + WALL_T, by0 + WALL_T, by1 - WALL_T, z0, zt, [WEST_DOOR], M["brick"], M["plaster"], "+x")
-    _wall_y(b, bx1 - WALL_T, bx1, by0 + WALL_T, by1 - WALL_T, z0, zt, [], M["brick"], M["plaster"], "-x")
-    _wall_x(b, bx0 + WALL_T, PARTITION_X1, PARTITION_Y - 0.1, PARTITION_Y + 0.1, z0, zt, [PARTITION_DOOR],
+    wall_x(b, bx0, bx1, by0, by0 + WALL_T, z0, zt, SOUTH_DOORS, M["brick"], M["plaster"], "+y")
+    wall_x(b, bx0, bx1, by1 - WALL_T, by1, z0, zt, [], M["brick"], M["plaster"], "-y")
+    wall_y(b, bx0, bx0 + WALL_T, by0 + WALL_T, by1 - WALL_T, z0, zt, [WEST_DOOR], M["brick"], M["plaster"], "+x")
+    wall_y(b, bx1 - WALL_T, bx1, by0 + WALL_T, by1 - WALL_T, z0, zt, [], M["brick"], M["plaster"], "-x")
+    wall_x(b, bx0 + WALL_T, PARTITION_X1, PARTITION_Y - 0.1, PARTITION_Y + 0.1, z0, zt, [PARTITION_DOOR],
             M["plaster"], M["plaster"], "+y")
     for x, y in PILLARS_XY:
         b.box((x - PILLAR_HALF, y - PILLAR_HALF, z0), (x + PILLAR_HALF, y + PILLAR_HALF, zt), M["concrete"], skip=("-z", "+z"))
@@ -333,7 +347,7 @@ def _building(b: "_Builder") -> None:
     b.box((bx0, by0, zt), (bx1, by1, BUILDING_TOP), M["facade"], mats={"-z": M["ceiling"], "+z": M["concrete"]}, skip=())
 
 
-def _backdrop(b: "_Builder") -> None:
+def _backdrop(b: "Builder") -> None:
     """Facade across the street, garden wall, neighbouring blocks closing the courtyard level."""
     lx0, lx1 = X_LONG
     px0, px1 = PLAZA[0], PLAZA[1]
@@ -346,34 +360,34 @@ def _backdrop(b: "_Builder") -> None:
     b.box((X_LONG[0], SIDEWALK_Y[1], SIDEWALK_Z), (BLOCK_X[0], 20.4, 10.0), M["facade"], skip=("-z", "-x", "+y"))
 
 
-def _furniture(b: "_Builder", rng: np.random.Generator) -> None:
+def _furniture(b: "Builder", rng: np.random.Generator) -> None:
     """Trees, poles, benches, planters, bollards and the car (the seed jitters positions)."""
     j = lambda s=0.25: float(rng.uniform(-s, s))  # noqa: E731
     for x in TREE_X:
-        _tree(b, rng, x + 0.0, -10.7, SIDEWALK_Z)
+        tree(b, rng, x + 0.0, -10.7, SIDEWALK_Z)
     for x, y in ((-24.0, 11.0), (-2.0, 11.5)):
-        _tree(b, rng, x + j(0.3), y + j(0.3), PLAZA_Z)
+        tree(b, rng, x + j(0.3), y + j(0.3), PLAZA_Z)
     for x in (-25.0, -12.0, 1.0, 14.0, 27.0):
-        _pole(b, x + j(0.2), -11.45, SIDEWALK_Z)
+        pole(b, x + j(0.2), -11.45, SIDEWALK_Z)
     for x, y, along in ((-16.0 + j(), -6.9, True), (-1.0 + j(), -6.9, True), (-18.0 + j(), 9.0, True),
                         (-7.0 + j(), 14.5, True), (2.6, 6.0 + j(), False)):
-        _bench(b, x, y, walk_height(np.array([x, y])).item(), along)
+        bench(b, x, y, walk_height(np.array([x, y])).item(), along)
     for x, y in ((-20.0, 6.0), (-4.0, 6.0), (0.0, 16.0)):  # on the plaza
-        _planter(b, x + j(0.2), y + j(0.2), PLAZA_Z, rng)
+        planter(b, x + j(0.2), y + j(0.2), PLAZA_Z, rng)
     for x, y in ((-3.0, -3.5), (3.0, -1.0), (29.0, 0.0)):
-        _planter(b, x + j(0.2), y + j(0.2), SIDEWALK_Z, rng)
+        planter(b, x + j(0.2), y + j(0.2), SIDEWALK_Z, rng)
     for x in (-3.0, -1.5, 3.0, 4.5):  # bollards at the courtyard entrance
         c = trimesh.creation.cylinder(radius=0.1, height=0.9, sections=10)
         c.apply_translation((x, -6.6, SIDEWALK_Z + 0.45))
         b.trimesh_(c, M["metal"])
     car_x0 = -10.0 + j(0.5)
-    _car(b, car_x0, car_x0 + 4.4, -13.3, STREET_Z)
+    car(b, car_x0, car_x0 + 4.4, -13.3, STREET_Z)
 
 
 def build_layout(seed: int = 0) -> Layout:
     """The demo block for `seed` (structure fixed; seed jitters details only)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7301]))
-    b = _Builder()
+    b = Builder()
     _ground_levels(b)
     _building(b)
     _backdrop(b)
@@ -382,4 +396,4 @@ def build_layout(seed: int = 0) -> Layout:
     palette = np.array([[0.62, 0.08, 0.07], [0.08, 0.22, 0.55], [0.85, 0.85, 0.82], [0.15, 0.35, 0.2]])
     car_color = palette[int(rng.integers(len(palette)))]
     regions = [{"polygon_xy": indoor_polygon(), "z_min": SIDEWALK_Z - 0.5, "z_max": LOBBY_TOP + 0.01}]
-    return Layout(V, F, Mt, car_color, regions)
+    return Layout(V, F, Mt, car_color, regions, walk_height)

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import textures
-from .layout import Layout, is_indoor_nav
+from .layout import Layout
 from .raycast import RayCaster
 
 SENSOR_ABOVE_RIG = 0.25  # the LiDAR sits on top of the camera rig
+CAST_BLOCK_RAYS = 1 << 21  # rays cast at once (whole scans): bounds the memory of a dense capture
 
 
 @dataclass(frozen=True)
@@ -52,13 +53,20 @@ def scan(caster: RayCaster, layout: Layout, sensor_positions: np.ndarray, patter
     S = sensor_positions.shape[0]
     dirs = np.concatenate([pattern.directions(rng) for _ in range(S)])  # [S*R, 3]
     R = pattern.rays
-    orig = np.repeat(sensor_positions, R, axis=0)
-    t, tri = caster.cast(orig, dirs)
-    keep = np.flatnonzero((tri >= 0) & (t <= max_range))
-    t, tri, d, o = t[keep], tri[keep], dirs[keep], orig[keep]
+    parts = []  # cast a block of scans at a time: only the kept returns of each block are held
+    step = max(1, CAST_BLOCK_RAYS // R)
+    for a in range(0, S, step):
+        d_blk = dirs[a * R:(a + step) * R]
+        o_blk = np.repeat(sensor_positions[a:a + step], R, axis=0)
+        t_blk, tri_blk = caster.cast(o_blk, d_blk)
+        k = np.flatnonzero((tri_blk >= 0) & (t_blk <= max_range))
+        parts.append((t_blk[k], tri_blk[k], d_blk[k], o_blk[k]))
+    t, tri, d, o = (np.concatenate([q[i] for q in parts]) for i in range(4)) if parts else (
+        np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    del parts, dirs
     exact = o + t[:, None] * d
     noisy = o + (t + rng.normal(0.0, noise_sigma, len(t)))[:, None] * d
     n = caster.normals[tri]
-    col = textures.shade(layout.face_material[tri], exact, n, np.full(len(t), 0.02), is_indoor_nav(exact), seed,
+    col = textures.shade(layout.face_material[tri], exact, n, np.full(len(t), 0.02), layout.is_indoor(exact), seed,
                          layout.car_color)
     return noisy, np.round(col * 255).astype(np.uint8), exact, tri

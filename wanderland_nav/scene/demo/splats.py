@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import textures
-from .layout import Layout, is_indoor_nav
+from .layout import Layout
 
 SH_C0 = 0.28209479177387814
 
@@ -86,7 +86,7 @@ def make_splats(layout: Layout, seen_tris: np.ndarray, trajectory: np.ndarray, s
     keep = d <= max_range
     pts, tri, rot = pts[keep], tri[keep], rot[keep]
     n = rot[:, :, 2]
-    rgb = textures.shade(layout.face_material[tri], pts, n, np.full(len(pts), spacing), is_indoor_nav(pts), seed,
+    rgb = textures.shade(layout.face_material[tri], pts, n, np.full(len(pts), spacing), layout.is_indoor(pts), seed,
                          layout.car_color)
     sig = sigma_factor * spacing
     log_scales = np.tile(np.log([sig, sig, thickness]), (len(pts), 1))

@@ -20,6 +20,7 @@ import numpy as np
 MATERIALS = (
     "asphalt", "granite", "paving", "plaza_stone", "concrete", "brick", "facade", "lobby_floor", "plaster",
     "ceiling", "wood", "metal", "bark", "foliage", "terracotta", "soil", "car_paint", "glass", "rubber", "grass",
+    "road", "marking", "car_paint_light",
 )
 SUN = np.array([0.3, 0.5, 0.81]) / np.linalg.norm([0.3, 0.5, 0.81])
 AMBIENT, DIFFUSE, INDOOR_LIGHT = 0.62, 0.45, 0.78
@@ -132,6 +133,12 @@ def _ground_and_wall_albedo(name: str, u, v, f, q, vert, s):
         zebra = lines(u, 1.0, 0.5, f, offset=0.25) * box_mask(u, v, -3.0, 0.5, -19.3, -12.7, f)
         m = np.clip(dash + edge + zebra, 0, 1) * (1.0 - vert)
         col = _mix(col, [0.88, 0.87, 0.8], 0.9 * m)
+    elif name == "road":  # asphalt without the demo street's markings (districts draw theirs as geometry)
+        c = 0.25 + 0.5 * fbm(u, v, 0.8, 7, s, f) * 0.35 + 0.08 * fbm(u, v, 24.0, 2, s + 5, f)
+        col = np.stack([c, c, c * 1.04], -1)
+    elif name == "marking":
+        c = 0.84 + 0.08 * fbm(u, v, 6.0, 3, s, f)
+        col = np.stack([c, c * 0.99, c * 0.92], -1)
     elif name == "granite":
         c = 0.56 + 0.3 * fbm(u, v, 20.0, 3, s, f)
         col = np.stack([c, c, c * 1.03], -1)
@@ -197,6 +204,8 @@ def _object_albedo(name: str, u, v, f, q, vert, s, car_color):
         col = np.array([0.32, 0.23, 0.15]) * (0.85 + 0.6 * fbm(u, v, 10.0, 4, s, f))[:, None]
     elif name == "car_paint":
         col = np.asarray(car_color) * (0.95 + 0.1 * fbm(u, v, 2.0, 2, s, f))[:, None]
+    elif name == "car_paint_light":
+        col = np.array([0.8, 0.8, 0.78]) * (0.95 + 0.1 * fbm(u, v, 2.0, 2, s, f))[:, None]
     elif name == "glass":
         col = _mix([0.1, 0.13, 0.17], [0.3, 0.36, 0.42], np.clip(0.5 + fbm(u, v, 0.7, 2, s, f), 0, 1))
     elif name == "rubber":
@@ -214,8 +223,16 @@ def lighting(n: np.ndarray, indoor: np.ndarray) -> np.ndarray:
     return np.where(indoor, INDOOR_LIGHT, sun)
 
 
+SHADE_CHUNK = 1 << 20  # points shaded at once: every step is per point, so chunks only bound the temporaries
+
+
 def shade(material, p, n, fw, indoor, seed: int, car_color) -> np.ndarray:
-    """Final linear colour `[N, 3]` in [0, 1]: albedo times lighting."""
+    """Final linear colour `[N, 3]` in [0, 1]: albedo times lighting (in chunks of `SHADE_CHUNK` points)."""
+    N = len(material)
+    if N > SHADE_CHUNK:
+        return np.concatenate([shade(material[a:a + SHADE_CHUNK], p[a:a + SHADE_CHUNK], n[a:a + SHADE_CHUNK],
+                                     fw[a:a + SHADE_CHUNK], indoor[a:a + SHADE_CHUNK], seed, car_color)
+                               for a in range(0, N, SHADE_CHUNK)])
     return np.clip(albedo(material, p, n, fw, seed, car_color) * lighting(n, indoor)[:, None], 0.0, 1.0)
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import textures
-from .layout import Layout, is_indoor_nav
+from .layout import Layout
 from .raycast import RayCaster
 
 
@@ -50,7 +50,7 @@ def render_views(caster: RayCaster, layout: Layout, world_from_cam: np.ndarray, 
         n = caster.normals[tri[h]]
         cosi = np.abs(np.einsum("ni,ni->n", n, dirs[h]))
         fw = t[h] * pix_angle / np.maximum(cosi, 0.15)
-        col[h] = textures.shade(layout.face_material[tri[h]], p, n, fw, is_indoor_nav(p), seed, layout.car_color)
+        col[h] = textures.shade(layout.face_material[tri[h]], p, n, fw, layout.is_indoor(p), seed, layout.car_color)
         z = np.where(hit, t * np.tile(d_cam[:, 2], c), 0.0)
         rgb[a:a + c] = np.round(col * 255.0).astype(np.uint8).reshape(c, height, width, 3)
         depth[a:a + c] = z.reshape(c, height, width)
