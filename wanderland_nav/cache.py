@@ -14,6 +14,8 @@ import hashlib
 import json
 import logging
 import os
+import stat
+import tempfile
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -52,6 +54,21 @@ def read_record(path: str | os.PathLike) -> dict | None:
         log.warning("%s: not a JSON object; treated as missing, what it describes is rebuilt and the record replaced", p)
         return None
     return obj
+
+
+def writable(folder: Path) -> bool:
+    """Whether the project may create files in `folder`: a folder without any write bit is read-only by its
+    owner's intent, even for root (who could write there anyway: a copy of shared data laid out read-only, say);
+    otherwise tried, not guessed (permissions, read-only mounts, ACLs)."""
+    try:
+        if not os.stat(folder).st_mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+            return False
+        fd, probe = tempfile.mkstemp(prefix=".write_probe.", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
 
 
 CACHE_ENV = "WANDERLAND_NAV_CACHE"

@@ -52,3 +52,21 @@ def test_a_cache_folder_that_cannot_be_made_is_named_with_the_setting(tmp_path, 
 def test_writable_is_tried_not_guessed(tmp_path):
     assert products.writable(tmp_path) and not products.writable(tmp_path / "missing")
     assert list(tmp_path.iterdir()) == []  # the probe is removed
+
+
+def test_a_folder_without_write_bits_is_read_only_even_for_root(tmp_path, monkeypatch):
+    """Shared data laid out without write bits stays as it is, even where the process could write through them
+    (root): the scene's products and a splat's hierarchy go to the user cache instead."""
+    from wanderland_nav.render.lod import cache_path
+    ro = tmp_path / "shared"
+    ro.mkdir()
+    (ro / "s.ply").write_bytes(b"ply")
+    ro.chmod(0o555)
+    monkeypatch.setenv(products.CACHE_ENV, str(tmp_path / "cache"))
+    try:
+        assert not products.writable(ro)
+        assert cache_path(ro / "s.ply", "ab" * 32).parent == tmp_path / "cache" / "lod"
+        assert products.products_dir(ro).parent == tmp_path / "cache" / "scenes"
+    finally:
+        ro.chmod(0o755)
+    assert cache_path(ro / "s.ply", "ab" * 32) == ro / "s.lod.npz"  # a writable folder keeps it beside the splat

@@ -8,8 +8,8 @@ test of `binning.py`, the front-to-back composite of `rasterize.py`, the backgro
 `api.py`) without per-pair tensors, cameras spread over threads. No gradients: the pure-torch renderer
 stays the differentiable reference (`render.backend=torch`), and the tests hold this one to it.
 
-Build: at first use `g++` (or `$CXX`) compiles the source into `$WANDERLAND_CACHE/kernels/` (default
-`~/.cache/wanderland_nav`) under a name keyed by the source, the flags, the compiler and the CPU kind, so it is
+Build: at first use `g++` (or `$CXX`) compiles the source into `kernels/` of the project's cache folder
+(`wanderland_nav.cache.cache_root`) under a name keyed by the source, the flags, the compiler and the CPU kind, so it is
 built once per machine; two processes building at once each write a temporary file and rename it into place. The
 library is loaded with ctypes (no torch headers, about a second to build). Where it cannot be built or
 loaded, `available()` is False and `render(..., backend="fused")` runs the torch path, with one warning.
@@ -34,6 +34,8 @@ import warnings
 from pathlib import Path
 
 import torch
+
+from wanderland_nav.cache import cache_root
 
 from .gaussians import Gaussians
 from .hierarchy import GaussianHierarchy, _camera_table
@@ -70,7 +72,7 @@ class _Args(ctypes.Structure):
 
 
 def _cache_root() -> Path:
-    return Path(os.environ.get("WANDERLAND_CACHE", Path.home() / ".cache" / "wanderland_nav")) / "kernels"
+    return cache_root() / "kernels"
 
 
 def _cpu_flags() -> tuple[str, ...]:

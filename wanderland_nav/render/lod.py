@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 
 from .gaussians import Gaussians
-from wanderland_nav.cache import cache_root, file_sha256
+from wanderland_nav.cache import cache_root, file_sha256, writable
 
 from .hierarchy import GaussianHierarchy, build_hierarchy, load_nodes, save_nodes
 
@@ -34,7 +34,7 @@ DEFAULT_LOD_PX = 1.0
 
 def cache_path(splat: Path, sha256: str) -> Path:
     """Where the hierarchy of `splat` lives: beside it when its folder is writable, else the user cache."""
-    if os.access(splat.parent, os.W_OK):
+    if writable(splat.parent):
         return splat.with_name(f"{splat.stem}.lod.npz")
     return cache_root() / "lod" / f"{sha256[:32]}.lod.npz"
 

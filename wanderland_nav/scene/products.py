@@ -10,24 +10,11 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
-import tempfile
 from pathlib import Path
 
-from wanderland_nav.cache import CACHE_ENV, cache_root  # the one user cache folder of the project
+from wanderland_nav.cache import CACHE_ENV, cache_root, writable  # the one user cache folder of the project
 
 log = logging.getLogger(__name__)
-
-def writable(folder: Path) -> bool:
-    """Whether a file can be created in `folder` (tried, not guessed: permissions, read-only mounts, ACLs)."""
-    try:
-        fd, probe = tempfile.mkstemp(prefix=".write_probe.", dir=folder)
-    except OSError:
-        return False
-    os.close(fd)
-    os.unlink(probe)
-    return True
-
 
 def products_dir(root: Path) -> Path | None:
     """None when `root` takes generated files itself; else the cache folder that stands in for it (created)."""
