@@ -20,10 +20,10 @@ from wanderland_nav.compose import (blind_env_config, env_factory, load_navmesh,
                                     scene_episodes, scene_gaussians, scene_identity, scene_overrides, typed_config)
 from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
 from wanderland_nav.compose.comparison import compare_checkpoints, write_comparison
-from wanderland_nav.compose.evaluating import reference_policy, run_scene_set
+from wanderland_nav.compose.evaluating import reference, run_scene_set
 from wanderland_nav.compose.schema import EvaluateConfig
-from wanderland_nav.envs.evaluation import write_results
-from wanderland_nav.envs.recording import evaluate_and_record
+from wanderland_nav.evaluation import EvalScene, Evaluator
+from wanderland_nav.evaluation.loop import write_results
 from wanderland_nav.episodes.generate import GeneratorSettings
 
 
@@ -53,10 +53,11 @@ def run(cfg: DictConfig):
     if env_cfg.camera.enabled and not c.render_for_reference:
         env_cfg = blind_env_config(env_cfg)
         print(f"reference {c.reference} does not read images: rendering is off (render_for_reference=true)")
-    env = env_factory(scene, episodes, env_cfg, split=split, batch_size=c.batch_size, seed=c.seed, device=c.device,
-                      navmesh=load_navmesh(scene), gaussians=scene_gaussians(scene, None, needed=env_cfg.camera.enabled))()
-    res = evaluate_and_record(env, reference_policy(c, env), c.save_rollouts, num_episodes=c.num_episodes, seed=c.seed,
-                              name=c.reference, frames=c.save_frames, progress=c.progress, episodes_path=episodes)
+    make = env_factory(scene, episodes, env_cfg, split=split, batch_size=c.batch_size, seed=c.seed, device=c.device,
+                       navmesh=load_navmesh(scene), gaussians=scene_gaussians(scene, None, needed=env_cfg.camera.enabled))
+    res = Evaluator({scene.name: EvalScene(make=make, episodes_path=episodes)}, per_scene=False,
+                    num_episodes=c.num_episodes, seed=c.seed, progress=c.progress,
+                    frames=c.save_frames).evaluate(reference(c), c.reference, rollout=c.save_rollouts)
     if c.save_rollouts:
         print(f"wrote rollouts to {c.save_rollouts}")
     print(f"{scene.name}: {len(res.records)} episodes (split {split}), reference {c.reference}\n{res.table}", flush=True)

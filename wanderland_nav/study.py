@@ -20,11 +20,12 @@ import hydra
 import torch
 from omegaconf import DictConfig
 
+from wanderland_nav.cache import Ledger
 from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
 from wanderland_nav.compose.schema import study_config
 from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.grounding_study.cells import StudyCells
-from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, plan_cells, run_cells
 from wanderland_nav.grounding_study.report import write_study_outputs
 from wanderland_nav.train import run as train_run
 
@@ -38,9 +39,9 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     out = Path(c.out)
     cells = plan_cells(c.study)
     execute = StudyCells(c, out, train_run, cells)
-    execute.check_trained_recipes(Manifest(out / MANIFEST))  # a stale policy is refused, never reused
+    execute.check_trained_recipes(Ledger(out / MANIFEST))  # a stale policy is refused, never reused
     # report_only: the tables of what other study processes have finished so far, running no cell
-    manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
+    manifest = Ledger(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}
     s = c.study
     # line 1 is also the chart's title: what the figure shows, not how long this invocation took

@@ -27,7 +27,7 @@ from statistics import median
 
 import torch
 
-from wanderland_nav.report import CAUSE_COLUMNS
+from wanderland_nav.evaluation.tables import CAUSE_COLUMNS
 from wanderland_nav.stats import rate_interval
 
 SPLITS = ("train", "val", "test")

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from wanderland_nav.report import episode_scores
+from wanderland_nav.evaluation.tables import episode_scores
 from wanderland_nav.stats import paired_difference
 
 

@@ -165,7 +165,7 @@ def test_a_person_on_the_robot_is_an_intervention_with_its_own_cause(demo):
                                [m0.min_person_distance, m1.min_person_distance], rtol=1e-6)
     np.testing.assert_allclose(td[keys.EPISODE_PATH_IRREGULARITY].flatten().numpy(),
                                [m0.path_irregularity, m1.path_irregularity], rtol=1e-5)
-    from wanderland_nav.report import comparison_table
+    from wanderland_nav.evaluation.tables import comparison_table
 
     table = comparison_table({"x": [m0.to_dict(), m1.to_dict()]})
     assert "person_collisions" in table.split("\n")[0] and "min_person_distance" in table
@@ -183,7 +183,7 @@ def test_people_are_recorded_and_replayed_as_moving_points(demo, tmp_path):
     import rerun as rr
 
     from wanderland_nav.envs import ExpertPolicy
-    from wanderland_nav.envs.recording import record_evaluation
+    from wanderland_nav.evaluation.recording import record_evaluation
     from wanderland_nav.rollouts import load_rollout
     from wanderland_nav.viz.recording import write_recording
 

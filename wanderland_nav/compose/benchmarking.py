@@ -33,11 +33,11 @@ from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set
 from wanderland_nav.compose.schema import BenchmarkConfig
-from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
+from wanderland_nav.evaluation import EvalScene, Evaluator, PolicyActor
 from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.external import ExternalActor, RemotePolicy, load_target
-from wanderland_nav.report import comparison_table, row_estimates
+from wanderland_nav.evaluation.tables import comparison_table, row_estimates
 from wanderland_nav.rl.route_goal import with_goal_input
 from wanderland_nav.scene import load_scene
 from wanderland_nav.tasks import SUCCESS_RULE, check_reads, check_task_episodes, hidden_reads, make_task, \
@@ -133,8 +133,8 @@ def _evaluate(entry: Entry, task, c: BenchmarkConfig, scene, episodes: Path, nav
             actor = ExpertPolicy(base_env) if entry.spec["reference"] == "expert" else \
                 RandomPolicy(base_env.action_spec, seed=c.seed)
         t0 = time.perf_counter()
-        res = run_evaluation(env, actor, c.num_episodes, seed=c.seed, name=f"{task.label}/{entry.name}",
-                             progress=c.progress)
+        res = Evaluator({str(episodes): EvalScene(env=env)}, per_scene=False, num_episodes=c.num_episodes, seed=c.seed,
+                        progress=c.progress).evaluate(actor, f"{task.label}/{entry.name}")
         seconds = time.perf_counter() - t0
     finally:
         env.close()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_json
@@ -18,11 +19,9 @@ from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, sc
 from wanderland_nav.compose.scene_sets import scene_env_fn
 from wanderland_nav.compose.schema import typed_config
 from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.envs.evaluation import PolicyActor
-from wanderland_nav.envs.recording import evaluate_and_record
-from wanderland_nav.report import comparison_table
+from wanderland_nav.evaluation import EvalScene, Evaluator
+from wanderland_nav.evaluation.tables import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
-from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 
 log = logging.getLogger(__name__)
 
@@ -77,17 +76,14 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
             label = str(path)
         if scene_set is not None:
             envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, lod_px=render.get("lod_px"))
-            res = SceneSetEvaluation(list(scene_set), envs, batch_size).run(PolicyActor(policy), num_episodes,
-                                                                            seed=seed, name=label, progress=progress)
+            scenes = {sid: EvalScene(make=partial(envs, sid, batch_size, seed)) for sid in scene_set}
         else:
             g = scene_gaussians(scene, render.get("lod_px"), needed=env_cfg.camera.enabled)
-            env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
-                                             seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
-            rollout = (Path(save_rollouts) / f"{label.replace('/', '_').replace('+', '_')}.npz"
-                       if save_rollouts is not None else None)
-            res = evaluate_and_record(env, PolicyActor(policy), rollout, num_episodes=num_episodes, seed=seed,
-                                      name=label, frames=save_frames, progress=progress, episodes_path=episodes_path)
-            env.close()
+            make = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
+                                              seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)
+            scenes = {scene.name: EvalScene(make=make, episodes_path=episodes_path)}
+        res = Evaluator(scenes, per_scene=scene_set is not None, num_episodes=num_episodes, seed=seed,
+                        progress=progress, rollouts=save_rollouts, frames=save_frames).evaluate(policy, label)
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table

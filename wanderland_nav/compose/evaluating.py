@@ -13,9 +13,9 @@ from wanderland_nav.compose.comparison import compare_checkpoints, write_compari
 from wanderland_nav.compose.identity import run_identity
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import EvaluateConfig
-from wanderland_nav.envs.evaluation import write_results
+from wanderland_nav.evaluation.loop import write_results
 from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
-from wanderland_nav.rl.scene_sets import SceneSetEvaluation
+from wanderland_nav.evaluation import EvalScene, Evaluator
 
 
 def reference_policy(c: EvaluateConfig, env):
@@ -25,6 +25,14 @@ def reference_policy(c: EvaluateConfig, env):
     if c.reference == "random":
         return RandomPolicy(env.action_spec, seed=c.seed)
     raise ValueError(f"reference={c.reference!r}: expected expert or random (trained policies: checkpoints=[...])")
+
+
+def reference(c: EvaluateConfig):
+    """`reference_policy` as a per-env policy for `Evaluator`: the references read their env (expert paths, action
+    spec), so each env gets its own."""
+    policy = partial(reference_policy, c)
+    policy.per_env = True
+    return policy
 
 
 def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
@@ -47,11 +55,10 @@ def run_scene_set(c: EvaluateConfig, cfg: DictConfig):
         write_comparison(out, rows, table, results, identity["hash"])
         return rows
     env_cfg = c.env if c.render_for_reference else blind_env_config(c.env)
-    policy = partial(reference_policy, c)
-    policy.per_env = True  # the references read their env (expert paths, action spec)
     envs = scene_env_fn(paths, env_cfg, split=split, device=c.device)
-    res = SceneSetEvaluation(list(paths), envs, c.batch_size).run(policy, c.num_episodes, seed=c.seed,
-                                                                  name=c.reference, progress=c.progress)
+    scenes = {sid: EvalScene(make=partial(envs, sid, c.batch_size, c.seed)) for sid in paths}
+    res = Evaluator(scenes, per_scene=True, num_episodes=c.num_episodes, seed=c.seed,
+                    progress=c.progress).evaluate(reference(c), c.reference)
     print(f"set {c.scene.name}: {len(paths)} scenes, {len(res.records)} episodes (split {split}), "
           f"reference {c.reference}\n{res.table}", flush=True)
     write_results(out, c.reference, res, meta={"scenes": paths, "split": split, "reference": c.reference,

@@ -5,7 +5,7 @@ A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes. `run_set_job
 with the same `navigation` settings the single-scene commands compose, so a `navigation.*` override
 reaches every scene and is part of the done-manifest key. `ready_scene_set` prepares the scenes a
 `train` / `evaluate` run needs (episodes made only where there are none), and `scene_env_fn` is the
-picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training, per-scene evaluation)
+picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training) and `evaluation.Evaluator` (per-scene evaluation)
 and the collector workers call.
 """
 

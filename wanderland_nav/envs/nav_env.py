@@ -52,9 +52,8 @@ from wanderland_nav.envs.camera import AgentCamera, Renderer
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
-from wanderland_nav.envs.metrics import EpisodeMetrics, social_metrics, spl
-from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, navigation_reward,
-                                         terminations, update_progress)
+from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES, EpisodeMetrics, social_metrics, spl
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
 log = logging.getLogger(__name__)

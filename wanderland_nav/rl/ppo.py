@@ -43,6 +43,7 @@ from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
 from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.errors import NonFiniteLossError
+from wanderland_nav.evaluation.metrics import aggregate_metrics
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.critic import NavCritic, explained_variance, fit_critic
 from wanderland_nav.rl.loggers import Logger
@@ -167,8 +168,6 @@ def env_episode_metrics(collector) -> dict[str, float]:
     finished = env.pop_finished_metrics()
     if not finished:
         return {}
-    from wanderland_nav.envs.metrics import aggregate_metrics
-
     o = aggregate_metrics(finished)["overall"]
     return {"train/episodes": o["episodes"],
             **{f"train/{k}": o[k] for k in ("NE", "distance_to_goal", "SR", "SPL", "IR", "nonfinite_actions")}}

@@ -20,7 +20,7 @@ from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.blank_camera import BlankCamera
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
-from wanderland_nav.report import BLANK_CAMERA, SAMPLED
+from wanderland_nav.evaluation.tables import BLANK_CAMERA, SAMPLED
 from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")
@@ -31,12 +31,11 @@ class Recipe:
     """What one training run does (all loaded, nothing read from a config here)."""
 
     policy: Any
-    eval_env: Any
+    evaluator: Any  # `evaluation.Evaluator`: evaluate(policy, name, step, deterministic=None) -> EvaluationResult
     env_fn: Callable[[], Any]  # picklable, for collector workers
     nav_from_scene: Any  # [3, 3] for the expert paths
     bc: BCConfig | None  # None: no BC phase
     ppo: PPOConfig | None  # None: no PPO phase
-    evaluate: Callable  # (name, policy, env, step, deterministic=None) -> EvaluationResult (None: eval.deterministic)
     logger: Any
     run_dir: Path
     config: dict  # stored in checkpoints
@@ -118,7 +117,9 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         r.policy.eval()
         t = time.perf_counter()
         with _timed(times, f"eval {name}"):
-            res = r.evaluate(name, policy or r.policy, r.eval_env, step, deterministic=deterministic)
+            res = r.evaluator.evaluate(policy or r.policy, name, step, deterministic=deterministic)
+        if r.evaluator.per_scene:
+            log.info("eval %s per scene:\n%s", name, res.table)
         o = res.summary["overall"]
         # logged before the result is stored: a kill in between redoes the evaluation and drops this row
         r.logger.log_scalars({f"{eval_prefix(name)}/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)

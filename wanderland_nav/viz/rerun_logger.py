@@ -22,7 +22,7 @@ from typing import Any, Callable
 import numpy as np
 import rerun as rr
 
-from wanderland_nav.envs.recording import rollout_from_tensordict
+from wanderland_nav.evaluation.recording import rollout_from_tensordict
 from wanderland_nav.rollouts import Rollout
 from wanderland_nav.viz.blueprint import default_blueprint
 from wanderland_nav.viz.rerun_rollout import log_rollout

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from wanderland_nav import keys
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.experts import waypoints_along_samples
 from wanderland_nav.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
 
