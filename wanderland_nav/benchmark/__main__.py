@@ -4,7 +4,7 @@
         'policies=[{name: expert, reference: expert}, {name: mine, target: my_pkg.my_module:MyPolicy},
                    {name: served, url: "http://127.0.0.1:8765"}, {name: cw, checkpoint: outputs/.../last.pt}]'
 
-Every policy runs every task whose observations cover what it reads (`wanderland_nav.tasks`); the others are
+Every policy runs every task whose observations cover what it reads (`benchmark.tasks`); the others are
 listed as not run, with the keys that kept them out. Prints one NE / SR / SPL / IR table with 95 % intervals
 (rows `task/policy`, `task/policy/indoor|outdoor`, and paired differences against `baseline`) and writes
 `table.txt`, `results.csv`, `timing.json` and one `runs/<task>/<policy>.json` per evaluation to `out`; a rerun
@@ -19,8 +19,8 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
+from wanderland_nav.benchmark.runner import run_benchmark
 from wanderland_nav.compose import scene_overrides, typed_config
-from wanderland_nav.compose.benchmarking import run_benchmark
 from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
 from wanderland_nav.compose.schema import BenchmarkConfig
 
