@@ -10,15 +10,15 @@ made on first use; the reference policies never look, so the camera is off for t
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from wanderland_nav.compose import (blind_env_config, env_factory, load_navmesh, prepared_scene, run_identity,
-                                    scene_episodes, scene_gaussians, scene_identity, scene_overrides, typed_config)
-from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
+                                    scene_episodes, scene_gaussians, scene_identity, typed_config)
+from wanderland_nav.compose.cli import hydra_output_dir
 from wanderland_nav.compose.comparison import compare_checkpoints, write_comparison
 from wanderland_nav.compose.evaluating import reference, run_scene_set
 from wanderland_nav.compose.schema import EvaluateConfig
@@ -68,15 +68,7 @@ def run(cfg: DictConfig):
     return res
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="evaluate")
-def hydra_main(cfg: DictConfig) -> None:
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-evaluate` and `python -m wanderland_nav.evaluate`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("evaluate", run)
 
 
 if __name__ == "__main__":

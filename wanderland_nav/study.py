@@ -11,17 +11,16 @@ cells (`<out>/done.json`). Sizes: `conf/study/grounding.yaml`; `debug=smoke` shr
 
 from __future__ import annotations
 
-import logging
-import sys
+from wanderland_nav.app import entry_point, log_to_stdout  # first: it readies the process (see app.py)
+
 import time
 from pathlib import Path
 
-import hydra
 import torch
 from omegaconf import DictConfig
 
 from wanderland_nav.cache import Ledger
-from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
+from wanderland_nav.compose.cli import quote_overrides
 from wanderland_nav.compose.schema import study_config
 from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.grounding_study.cells import StudyCells
@@ -56,17 +55,7 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="study")
-def hydra_main(cfg: DictConfig) -> None:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
-                        force=True)
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-study` and `python -m wanderland_nav.study`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
-    hydra_main()
+main = entry_point("study", run, argv=quote_overrides, before=log_to_stdout)
 
 
 if __name__ == "__main__":

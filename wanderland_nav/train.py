@@ -8,15 +8,15 @@ Starting the same command again resumes; a run folder of another configuration o
 
 from __future__ import annotations
 
+from wanderland_nav.app import entry_point, log_to_stdout  # first: it readies the process (see app.py)
+
 import logging
-import sys
 import time
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from wanderland_nav.atomic import atomic_write_text
-from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
+from wanderland_nav.compose import typed_config
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.compose.training import training_recipe
 from wanderland_nav.evaluation.tables import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
@@ -54,17 +54,7 @@ def run(cfg: DictConfig) -> dict:
     return {r: results[r]["summary"]["overall"] for r in rows}
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
-def hydra_main(cfg: DictConfig) -> None:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
-                        force=True)
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-train` and `python -m wanderland_nav.train`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("train", run, before=log_to_stdout)
 
 
 if __name__ == "__main__":

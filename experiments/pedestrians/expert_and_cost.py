@@ -25,7 +25,7 @@ from wanderland_nav.render.lod import load_splat
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.demo import make_demo_scene
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation.scene import prepare_scene
 
 
 def demo(root: Path, episodes: int):

@@ -21,7 +21,7 @@ import torch
 
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.evaluation.tables import episode_scores
-from wanderland_nav.stats import bootstrap_interval
+from wanderland_nav.evaluation.stats import bootstrap_interval
 from wanderland_nav.viz.curves import PANELS, read_metrics
 
 

@@ -89,7 +89,7 @@ def main() -> None:
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-    from wanderland_nav.scene_preparation import ensure_demo_scene
+    from wanderland_nav.preparation.scene import ensure_demo_scene
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")

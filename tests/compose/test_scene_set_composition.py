@@ -68,7 +68,7 @@ def test_evaluate_expert_over_a_set_has_a_row_per_scene(linked_set, tmp_path):
 
 
 def test_scene_set_preparation_uses_the_composed_navigation_group():
-    from wanderland_nav.prepare_set import jobs_for
+    from wanderland_nav.preparation.scene_set import jobs_for
     from wanderland_nav.scene.sets import demo_scene_set
 
     s = demo_scene_set("/tmp/unused", seeds=[0])

@@ -54,7 +54,7 @@ def test_rollout_records_the_episodes_file_used_and_no_blank_frames(prepared_dem
     a camera that is off stores no 8x8 placeholder frames."""
     import shutil
 
-    from wanderland_nav.rollouts import load_rollout
+    from wanderland_nav.evaluation.rollouts import load_rollout
 
     other = tmp_path / "elsewhere" / "my_episodes.json"
     other.parent.mkdir()

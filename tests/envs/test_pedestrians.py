@@ -184,7 +184,7 @@ def test_people_are_recorded_and_replayed_as_moving_points(demo, tmp_path):
 
     from wanderland_nav.envs import ExpertPolicy
     from wanderland_nav.evaluation.recording import record_evaluation
-    from wanderland_nav.rollouts import load_rollout
+    from wanderland_nav.evaluation.rollouts import load_rollout
     from wanderland_nav.viz.recording import write_recording
 
     env = _env(demo, count=4)

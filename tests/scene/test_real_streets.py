@@ -34,7 +34,7 @@ def kitti_street(tmp_path_factory, shared_data):
 
 @pytest.fixture(scope="module")
 def prepared_street(kitti_street):
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     return prepare_scene(kitti_street, collision=CollisionSettings(crop_radius=10.0))
 

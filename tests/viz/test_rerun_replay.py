@@ -16,7 +16,7 @@ import rerun as rr
 import torch
 
 from wanderland_nav.evaluation.recording import RecordingEnv, RolloutRecorder, record_evaluation
-from wanderland_nav.rollouts import Rollout, RolloutFormatError, load_rollout, save_rollout
+from wanderland_nav.evaluation.rollouts import Rollout, RolloutFormatError, load_rollout, save_rollout
 
 H = W = 24  # tiny camera: the CPU renderer stays well inside the test budget
 

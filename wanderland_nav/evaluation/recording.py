@@ -1,4 +1,4 @@
-"""Recording a running `NavEnv` into a `Rollout` (the file format of `wanderland_nav.rollouts`).
+"""Recording a running `NavEnv` into a `Rollout` (the file format of `wanderland_nav.evaluation.rollouts`).
 
 The recorder lives beside the env because it reads the env's TensorDicts and camera; the file
 format itself stays a plain numpy module that replay and viz read without the env.
@@ -15,7 +15,7 @@ import torch
 from wanderland_nav import keys
 from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.experts import waypoints_along_samples
-from wanderland_nav.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
+from wanderland_nav.evaluation.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
 
 
 class RolloutRecorder:

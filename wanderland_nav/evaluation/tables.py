@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 import torch
 
 from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES
-from wanderland_nav.stats import Estimate, bootstrap_interval, paired_difference, rate_interval, seed_aggregate
+from wanderland_nav.evaluation.stats import Estimate, bootstrap_interval, paired_difference, rate_interval, seed_aggregate
 
 #: NE = Euclidean end-to-goal distance (the paper's), distance_to_goal = geodesic end-to-goal distance,
 #: SPL with horizontal lengths; definitions in `wanderland_nav.evaluation.metrics`
