@@ -7,9 +7,10 @@ import json
 import pytest
 
 from wanderland_nav.compose import compose_config, typed_config
+from wanderland_nav.compose.evaluating import reference_policy
 from wanderland_nav.compose.schema import EvaluateConfig
 from wanderland_nav.envs import NavEnvConfig
-from wanderland_nav.evaluate import reference_policy, run
+from wanderland_nav.evaluate import run
 
 # the session fixtures prepare at 0.25 m voxels; the same setting keeps their artefacts (no rebake)
 FIXTURE_NAV = "navigation.collision.voxel_size=0.25"

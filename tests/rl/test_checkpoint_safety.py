@@ -51,7 +51,7 @@ def test_the_hostile_files_do_run_code_when_unpickled(tmp_path):
 
 
 def _loaders():
-    from wanderland_nav.compose.build import policy_from_checkpoint
+    from wanderland_nav.compose.checkpoints import policy_from_checkpoint
     from wanderland_nav.compose.schema import TrainConfig
     from wanderland_nav.compose.training import checked_run_dir
 

@@ -23,8 +23,8 @@ from typing import Any, ClassVar
 from wanderland_nav import keys
 from wanderland_nav.benchmark.tasks import Task, task_env_config
 from wanderland_nav.cache import file_sha256
-from wanderland_nav.compose.build import blind_env_config, policy_from_checkpoint, shaped_env_config
-from wanderland_nav.compose.comparison import stored_env_config
+from wanderland_nav.compose.build import blind_env_config, shaped_env_config
+from wanderland_nav.compose.checkpoints import trained_policy
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
 from wanderland_nav.evaluation import PolicyActor
@@ -115,19 +115,17 @@ class ReferenceSource(PolicySource):
 @policy_source
 class CheckpointSource(PolicySource):
     """`{checkpoint: path/last.pt}`: a trained package policy, evaluated in the env it was trained in (its stored
-    `env` and `render.image_size`), with its mean waypoints."""
+    `env` and `render.image_size`, read from its policy card), with its mean waypoints."""
 
     kind = "checkpoint"
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
         spec, settings = self.spec, self.settings
-        self.policy, ckpt = policy_from_checkpoint(spec["checkpoint"], settings.device)
-        conf = ckpt.get("config") or {}
-        self.trained_env = stored_env_config(conf, spec["checkpoint"])
-        self.image_size = (conf.get("render") or {}).get("image_size")
+        trained = trained_policy(spec["checkpoint"], settings.device)  # from the checkpoint's card alone
+        self.policy, self.trained_env, self.image_size = trained.policy, trained.env, trained.image_size
         self.reads = tuple(map(str, self.policy.in_keys))
-        self.trained_goal_input = str(conf.get("goal_input") or "goal")
+        self.trained_goal_input = trained.goal_input
         self.content = file_sha256(spec["checkpoint"])
         self._actor = PolicyActor(self.policy)
 

@@ -13,6 +13,7 @@ import torch
 
 from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
                                           make_policy_from_config, scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
@@ -134,8 +135,8 @@ def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
     recipe = Recipe(policy=policy, evaluator=evaluator, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
-                    logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
-                    num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
+                    logger=logger, run_dir=run_dir, config=config, card=policy_card(config, policy), identity=identity,
+                    seed=c.seed, num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
                     first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows,
                     blank_camera_rows=c.eval.blank_camera_rows)
     return recipe, scene

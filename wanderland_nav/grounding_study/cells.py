@@ -22,6 +22,7 @@ from planners import NavMesh
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.cache import Ledger
 from wanderland_nav.compose.build import load_navmesh, make_policy_from_config
+from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.cli import compose_config, resolved
 from wanderland_nav.compose.comparison import compare_checkpoints
 from wanderland_nav.compose.episode_file import episodes_for_run, split_counts
@@ -182,7 +183,7 @@ class StudyCells:
         torch.manual_seed(cell.seed)
         policy = make_policy_from_config(conf["policy"], self.c.device)
         save_checkpoint(folder / CHECKPOINTS["untrained"], policy=policy, optimizer=None, counters={}, config=conf,
-                        phase="untrained")
+                        card=policy_card(conf, policy), phase="untrained")
         return {"checkpoint": str(folder / CHECKPOINTS["untrained"])}
 
     def _train(self, cell: Cell, folder: Path) -> dict:

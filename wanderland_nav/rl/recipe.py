@@ -49,6 +49,7 @@ class Recipe:
     kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
     sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
     blank_camera_rows: bool = False  # and with its camera blanked, "<row> blank camera" (rl/blank_camera.py)
+    card: dict | None = None  # the policy card stored beside the weights (compose.checkpoints.policy_card)
 
 
 def eval_prefix(row: str) -> str:
@@ -101,7 +102,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     results = _load_results(results_path, state, r.identity["hash"])
     phase = state.get("phase") if state else None
     r.logger.truncate(logged_before(state, results))
-    save_kw = dict(config={**r.config, "identity": r.identity})
+    save_kw = dict(config={**r.config, "identity": r.identity}, card=r.card)
     times: dict[str, float] = {}
 
     def evaluate(name: str, step: int) -> None:
@@ -162,7 +163,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     if r.ppo is not None:
         trainer = PPOTrainer(r.policy, train_env if train_env is not None else r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
                              ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress,
-                             kinematics=r.kinematics)
+                             kinematics=r.kinematics, card=r.card)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)
