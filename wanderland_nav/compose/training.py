@@ -136,7 +136,7 @@ def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     recipe = Recipe(policy=policy, evaluator=evaluator, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
                     logger=logger, run_dir=run_dir, config=config, card=policy_card(config, policy), identity=identity,
-                    seed=c.seed, num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows,
-                    blank_camera_rows=c.eval.blank_camera_rows)
+                    seed=c.seed, num_workers=c.collector.num_workers, ray=c.collector.ray_options(),
+                    progress=c.progress, first_row=first, kinematics=env_cfg.kinematics,
+                    sampled_rows=c.eval.sampled_rows, blank_camera_rows=c.eval.blank_camera_rows)
     return recipe, scene
