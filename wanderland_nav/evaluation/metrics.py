@@ -28,7 +28,7 @@ from typing import Iterable, Sequence
 #: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
 #: fire on the same step the first listed wins: leaving the navmesh is the most specific, then stuck (blocked and
 #: motionless for `stuck_steps`), then no progress (the catch-all: `no_progress_steps` without a new best distance).
-#: Code 4, "pedestrian", is set by the env when the robot touches a person (`envs.crowd`), where no other rule fired.
+#: Code 4, "pedestrian", is set by the env when the robot touches a person (`envs.pedestrians.crowd`), where no other rule fired.
 #: The env's rules (`envs.rewards.intervention_cause`) emit these codes; the records and tables name them.
 INTERVENTION_CAUSES = ("off_navmesh", "stuck", "no_progress", "pedestrian")
 
