@@ -42,7 +42,7 @@ def prepare(preset: str, root: Path, num_episodes: int, lod_px: float | None = N
     from planners import NavMesh
     from wanderland_nav.episodes.generate import write_scene_episodes
     from wanderland_nav.render.lod import load_splat
-    from wanderland_nav.scene_preparation import ensure_demo_scene
+    from wanderland_nav.preparation.scene import ensure_demo_scene
     from wanderland_nav.scene import load_scene
 
     scene = ensure_demo_scene(root / preset, seed=0, preset=preset)

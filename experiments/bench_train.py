@@ -84,7 +84,7 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
 def bench_env(name: str, iterations: int, batch: int) -> dict:
     from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.envs import NavEnvConfig
-    from wanderland_nav.scene_preparation import ensure_demo_scene
+    from wanderland_nav.preparation.scene import ensure_demo_scene
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")
     episodes = Path(scene.root) / "episodes.json"

@@ -91,7 +91,7 @@ def prepared_demo_scene(tiny_demo_scene, tmp_path_factory) -> Path:
 
     from wanderland_nav.compose import compose_config
     from wanderland_nav.compose.schema import PrepareConfig, typed_config
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
     from wanderland_nav.scene.collision import CollisionSettings
 
     dst = tmp_path_factory.mktemp("prepared") / Path(tiny_demo_scene).name

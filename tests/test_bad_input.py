@@ -43,7 +43,7 @@ def test_error_type_carries_path_and_field(tmp_path):
     # the older format errors are the same family: one except clause catches every bad input
     from wanderland_nav.episodes.schema import EpisodeFormatError
     from wanderland_nav.render.ply import PlyError
-    from wanderland_nav.rollouts import RolloutFormatError
+    from wanderland_nav.evaluation.rollouts import RolloutFormatError
     from wanderland_nav.scene.colmap import ColmapFormatError
     from wanderland_nav.scene.types import SceneFormatError
     from wanderland_nav.scene.pointcloud import PointCloudFormatError
@@ -135,7 +135,7 @@ def demo_copy(tiny_demo_scene, tmp_path) -> Path:
 
 
 def test_prepare_rebuilds_a_truncated_artefact_instead_of_calling_it_up_to_date(demo_copy):
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
     from wanderland_nav.scene.collision import CollisionSettings
 
     fast = {"collision": CollisionSettings(voxel_size=0.6), "navmesh": NavMeshSettings(cell_size=0.5, cell_height=0.2)}
@@ -162,7 +162,7 @@ def test_prepare_rebuilds_a_truncated_artefact_instead_of_calling_it_up_to_date(
 
 
 def test_empty_point_cloud_names_scene(demo_copy):
-    from wanderland_nav.scene_preparation import build_collision_mesh
+    from wanderland_nav.preparation.scene import build_collision_mesh
     from wanderland_nav.scene import load_scene
     from wanderland_nav.scene.collision import CollisionSettings
 

@@ -26,19 +26,19 @@ def test_a_record_sidecar(damaged, caplog):
 
 
 def test_a_scene_sets_done_manifest(damaged, caplog):
-    from wanderland_nav.prepare_set import MANIFEST_FORMAT, _read_manifest
+    from wanderland_nav.preparation.scene_set import MANIFEST_FORMAT, _read_manifest
 
-    with caplog.at_level(logging.WARNING, logger="wanderland_nav.prepare_set"):
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.preparation.scene_set"):
         assert _read_manifest(damaged) == {"format": MANIFEST_FORMAT, "done": {}, "failed": {}}
     assert f"{damaged}: unreadable done-manifest" in caplog.text
 
 
-def test_the_grounding_studys_done_manifest(damaged, caplog):
-    from wanderland_nav.grounding_study.plan import Manifest
+def test_the_resumable_stores_ledger(damaged, caplog):
+    from wanderland_nav.cache import Ledger
 
-    with caplog.at_level(logging.WARNING, logger="wanderland_nav.study"):
-        assert Manifest(damaged).entries == {}
-    assert f"{damaged}: unreadable done-manifest" in caplog.text
+    with caplog.at_level(logging.WARNING, logger="wanderland_nav.cache"):
+        assert Ledger(damaged).entries == {}
+    assert f"{damaged}: unreadable ledger" in caplog.text
 
 
 def test_a_training_runs_stored_evaluations(damaged, caplog):

@@ -211,6 +211,10 @@ def test_exp_runs_with_smoke(exp, demo_episodes, tmp_path):
     assert sorted(p.name for p in ckdir.glob("bc_round*.pt")) == [f"bc_round{k}.pt" for k in range(1, rounds + 1)]
     last_round, bc = load_checkpoint(ckdir / f"bc_round{rounds}.pt"), load_checkpoint(ckdir / "bc.pt")
     assert last_round["phase"] == f"bc_round{rounds}"
+    # every checkpoint of the run describes itself: its policy card says what the training config says
+    for c in (ck, last_round, bc):
+        assert c["card"]["policy"] == ck["config"]["policy"] and c["card"]["env"] == ck["config"]["env"]
+        assert c["card"]["render"]["image_size"] == ck["config"]["render"]["image_size"]
     assert all(torch.equal(v, bc["policy"][n]) for n, v in last_round["policy"].items())
     if rl:
         assert ck["phase"] == "ppo_done" and ck["counters"] == {"ppo_iteration": 2, "ppo_frames": 16}

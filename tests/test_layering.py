@@ -115,7 +115,7 @@ def test_part_imports_only_what_its_row_allows(part):
 
 @pytest.mark.parametrize("rel,source", [
     ("wanderland_nav/envs/sneaky.py", "from wanderland_nav.compose import env_factory\n"),
-    ("wanderland_nav/rollouts.py", "def f():\n    from wanderland_nav.envs.camera import AgentCamera\n"),
+    ("wanderland_nav/evaluation/rollouts.py", "def f():\n    from wanderland_nav.envs.camera import AgentCamera\n"),
     ("planners/sneaky.py", "import wanderland_nav.scene.loader\n"),
     ("wanderland_nav/rl/sneaky.py", "from omegaconf import DictConfig\n"),
     ("policies/sneaky.py", "from wanderland_nav import geometry\n"),

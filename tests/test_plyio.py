@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wanderland_nav.plyio import element_table, read_ply_data, write_ply_table
+from wanderland_nav.render.plyio import element_table, read_ply_data, write_ply_table
 
 
 class Bad(ValueError):

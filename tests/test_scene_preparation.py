@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from wanderland_nav import scene_preparation
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation import scene as scene_preparation
+from wanderland_nav.preparation.scene import prepare_scene
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.collision import CollisionSettings
 
@@ -116,7 +116,7 @@ class _FakeNavMesh:
 
 
 def test_navmesh_rebakes_only_when_needed(demo_copy, monkeypatch):
-    import wanderland_nav.scene_preparation as preparation
+    import wanderland_nav.preparation.scene as preparation
 
     monkeypatch.setattr(preparation, "NavMesh", _FakeNavMesh)
     _FakeNavMesh.bakes = 0
@@ -169,7 +169,7 @@ def test_a_navmesh_baked_for_another_up_axis_is_refused_where_the_scene_is_prepa
     from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
     from wanderland_nav.compose.scene import prepared_scene
     from wanderland_nav.errors import WanderlandInputError
-    from wanderland_nav.scene_preparation import check_navmesh_frame
+    from wanderland_nav.preparation.scene import check_navmesh_frame
 
     root = tmp_path / "demo"
     shutil.copytree(prepared_demo_scene, root)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from wanderland_nav.stats import (bootstrap_interval, interquartile_mean, normal_quantile, paired_difference,
+from wanderland_nav.evaluation.stats import (bootstrap_interval, interquartile_mean, normal_quantile, paired_difference,
                                   rate_interval, seed_aggregate, wilson_interval)
 
 

@@ -4,19 +4,13 @@ scene folder -> Scene -> collision mesh -> NavMesh -> episodes.json -> NavEnv ->
 with Gaussians -> render() as the camera and rerun as the eyes. See ARCHITECTURE.md.
 
 `wanderland_nav.make_env(scene="demo")` is the one-call TorchRL environment (`compose/make_env.py`);
-it is imported on first use, so `import wanderland_nav` stays free of torch, Hydra and TorchRL. Where
-Gymnasium is installed (the `gym` extra), `import wanderland_nav` registers `WanderlandNav-v0`
+it is imported on first use, so `import wanderland_nav` stays free of torch, Hydra and TorchRL, and importing the
+package changes nothing in the process (the entry points ready it: `wanderland_nav/app.py`) but Gymnasium's
+registry: where Gymnasium is installed (the `gym` extra), `import wanderland_nav` registers `WanderlandNav-v0`
 (`wanderland_nav/gym.py`: Gymnasium and numpy only; the env is built on the first `gymnasium.make`).
 """
 
 import importlib.util
-import os
-
-# Before torch (and its OpenMP runtime) loads, which every entry point does after importing this package:
-# OpenMP threads that spin while they wait burn the CPU that other processes (or the env's render threads)
-# need. On a busy 2-core machine a 48 px render took 12 s with spinning and 0.08 s with passive waiting,
-# and a policy update 2.4 s instead of 0.9 s. A value the user set is kept.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
 

@@ -6,14 +6,14 @@ Thin Hydra entry point: compose prepares the scene (conf/navigation/), then
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 from pathlib import Path
 
-import hydra
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import CONF_DIR, prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose import prepared_scene, typed_config
 from wanderland_nav.compose.schema import ExportUsdConfig
 from wanderland_nav.usd import UsdExportSettings, export_scene_usd
 
@@ -30,15 +30,7 @@ def run(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="export_usd")
-def hydra_main(cfg: DictConfig) -> None:
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-export-usd` and `python -m wanderland_nav.export_usd`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("export_usd", run)
 
 
 if __name__ == "__main__":

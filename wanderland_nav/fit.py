@@ -12,12 +12,11 @@ Examples:
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
 
-import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import OmegaConf
 
-from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
+from wanderland_nav.compose import typed_config
 from wanderland_nav.compose.fitting import fit_parts
 from wanderland_nav.compose.schema import FitRunConfig
 from wanderland_nav.gsfit.run import fit_scene
@@ -37,15 +36,7 @@ def run_fit(cfg) -> dict:
     return results
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="fit")
-def hydra_main(cfg: DictConfig) -> None:
-    run_fit(cfg)
-
-
-def main() -> None:
-    """`wanderland-fit` and `python -m wanderland_nav.fit`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("fit", run_fit)
 
 
 if __name__ == "__main__":

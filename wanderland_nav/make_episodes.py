@@ -13,16 +13,17 @@ failures are listed at the end and the exit status is 1.
 
 from __future__ import annotations
 
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
+from functools import partial
 import multiprocessing as mp
 import os
-import sys
 from concurrent.futures import ProcessPoolExecutor
 
-import hydra
 import torch
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
+from wanderland_nav.compose import scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import process_scene, resolve_scenes
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import MakeEpisodesConfig
@@ -58,16 +59,7 @@ def run(cfg: DictConfig):
     return summaries
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="make_episodes")
-def hydra_main(cfg: DictConfig) -> None:
-    if getattr(run(cfg), "failed", None):
-        sys.exit(1)
-
-
-def main() -> None:
-    """`wanderland-make-episodes` and `python -m wanderland_nav.make_episodes`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:], list_key="scenes")
-    hydra_main()
+main = entry_point("make_episodes", run, argv=partial(scene_overrides, list_key="scenes"))
 
 
 if __name__ == "__main__":

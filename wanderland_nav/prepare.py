@@ -1,20 +1,20 @@
 """`python -m wanderland_nav.prepare [scene=demo | scene=<folder> | scene=<set>]`: make (demo) + prepare scenes.
 
 Collision mesh and navmesh settings come from `conf/navigation/` (the group train, evaluate and
-make_episodes compose too); steps whose outputs are up to date are skipped (`scene_preparation`).
+make_episodes compose too); steps whose outputs are up to date are skipped (`preparation.scene`).
 A scene set (`scene=demo_set`, or any `scene.set`) is prepared scene by scene in parallel and resumably
 (`compose.scene_sets.run_set_jobs`): failed scenes are listed at the end and the exit status is 1.
 """
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 import time
 
-import hydra
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import CONF_DIR, prepared_scene, scene_overrides, typed_config
+from wanderland_nav.compose import prepared_scene, typed_config
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import PrepareConfig
 
@@ -25,7 +25,7 @@ def _took(side: dict) -> str:
 
 def run(cfg: DictConfig):
     """Everything `main` does (tests call it with a composed config). Returns the preparation report
-    (a scene set: the `prepare_set.BatchReport`)."""
+    (a scene set: the `preparation.scene_set.BatchReport`)."""
     t0 = time.perf_counter()
     c: PrepareConfig = typed_config(cfg, PrepareConfig)
     if c.scene.set:
@@ -57,16 +57,7 @@ def run(cfg: DictConfig):
     return rep
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="prepare")
-def hydra_main(cfg: DictConfig) -> None:
-    if getattr(run(cfg), "failed", None):
-        sys.exit(1)
-
-
-def main() -> None:
-    """`wanderland-prepare` and `python -m wanderland_nav.prepare`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("prepare", run)
 
 
 if __name__ == "__main__":

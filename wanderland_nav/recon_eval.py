@@ -12,15 +12,14 @@ Examples:
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 from pathlib import Path
 
-import hydra
-from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from wanderland_nav.compose import SCHEMAS, typed_config
-from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
+from wanderland_nav.compose.cli import hydra_output_dir, quote_overrides
 from wanderland_nav.geometry import up_vector
 from wanderland_nav.gsfit.lpips import LPIPS
 from wanderland_nav.recon import evaluate_paths
@@ -35,7 +34,7 @@ def run(cfg: dict) -> dict:
     """Everything `main` does, on a plain dict (tests call it without Hydra). Returns what was written."""
     if cfg.get("gt") is None or (cfg.get("pred") is None and cfg.get("nvs") is None):
         raise ValueError("recon_eval needs gt=<path> and pred=<path> (poses) and/or nvs=<renders folder> (images)")
-    out = Path(cfg["out"]) if cfg.get("out") else _hydra_output_dir()
+    out = Path(cfg["out"]) if cfg.get("out") else hydra_output_dir()
     bench = nvs = None
     if cfg.get("pred") is not None:
         bench = evaluate_paths(cfg["pred"], cfg["gt"], max_time_diff=float(cfg["max_time_diff"]),
@@ -77,23 +76,13 @@ def _draw(out: Path, bench, *, plot: bool, rerun: bool) -> list[Path]:
     return written
 
 
-def _hydra_output_dir() -> Path:
-    try:
-        return Path(HydraConfig.get().runtime.output_dir)
-    except ValueError:  # composed without Hydra's runtime (tests): current folder
-        return Path.cwd()
+def run_config(cfg: DictConfig) -> dict:
+    """`run` on the composed config, once it is typed (a typo or a wrong type fails here, with the key named)."""
+    typed_config(cfg, SCHEMAS["recon_eval"])
+    return run(OmegaConf.to_container(cfg, resolve=True))
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="recon_eval")
-def hydra_main(cfg: DictConfig) -> None:
-    typed_config(cfg, SCHEMAS["recon_eval"])  # a typo or a wrong type fails here, with the key named
-    run(OmegaConf.to_container(cfg, resolve=True))
-
-
-def main() -> None:
-    """`wanderland-recon-eval` and `python -m wanderland_nav.recon_eval`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
-    hydra_main()
+main = entry_point("recon_eval", run_config, argv=quote_overrides)
 
 
 if __name__ == "__main__":

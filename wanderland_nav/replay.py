@@ -13,14 +13,15 @@
 
 from __future__ import annotations
 
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 import sys
 import time
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import CONF_DIR, typed_config
+from wanderland_nav.compose import typed_config
 from wanderland_nav.compose.cli import quote_overrides
 from wanderland_nav.compose.replaying import replay_frames, replay_inputs
 from wanderland_nav.compose.schema import ReplayConfig
@@ -43,18 +44,16 @@ def run(cfg: DictConfig) -> dict:
     return {**counts, "out": str(out)}
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="replay")
-def hydra_main(cfg: DictConfig) -> None:
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-replay` and `python -m wanderland_nav.replay`: the command line, then Hydra."""
-    if any(a.startswith("scene=") for a in sys.argv[1:]):  # Hydra's own message names no way out
+def replay_overrides(argv: list[str]) -> list[str]:
+    """The overrides quoted for Hydra (`quote_overrides`); `scene=` is refused with the way out (Hydra's own
+    message names none): a rollout records its own scene."""
+    if any(a.startswith("scene=") for a in argv):
         sys.exit("replay takes rollout=<file.npz> or episodes=<episodes.json> [scene_path=<scene folder>], not "
                  "scene=: a rollout records its own scene (over a scene set, replay one scene's file at a time)")
-    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
-    hydra_main()
+    return quote_overrides(argv)
+
+
+main = entry_point("replay", run, argv=replay_overrides)
 
 
 if __name__ == "__main__":

@@ -12,13 +12,11 @@ until stopped. The evaluator reaches it with `policies=[{name: ..., url: http://
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
 
-import hydra
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import policy_from_checkpoint, typed_config
-from wanderland_nav.compose.cli import CONF_DIR
 from wanderland_nav.compose.schema import ServePolicyConfig
 from wanderland_nav.external.actor import NavPolicyAsExternal
 from wanderland_nav.external.protocol import load_target
@@ -45,8 +43,8 @@ def make_server(cfg: DictConfig) -> PolicyServer | NavDPServer:
     return server(policy, c.host, c.port, max_body_bytes=c.max_body_mb << 20, allowed_hosts=tuple(c.allowed_hosts))
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="serve_policy")
-def hydra_main(cfg: DictConfig) -> None:
+def serve(cfg: DictConfig) -> None:
+    """Serve the composed config's policy until stopped (Ctrl-C)."""
     server = make_server(cfg)
     print(f"serving {type(server.policy).__name__} at {server.url}", flush=True)
     try:
@@ -57,9 +55,7 @@ def hydra_main(cfg: DictConfig) -> None:
         server.server_close()
 
 
-def main() -> None:
-    """`wanderland-serve-policy` and `python -m wanderland_nav.serve_policy`: the command line, then Hydra."""
-    hydra_main()
+main = entry_point("serve_policy", serve, argv=list)  # its overrides name no scene and no path to quote
 
 
 if __name__ == "__main__":

@@ -11,20 +11,20 @@ cells (`<out>/done.json`). Sizes: `conf/study/grounding.yaml`; `debug=smoke` shr
 
 from __future__ import annotations
 
-import logging
-import sys
+from wanderland_nav.app import entry_point, log_to_stdout  # first: it readies the process (see app.py)
+
 import time
 from pathlib import Path
 
-import hydra
 import torch
 from omegaconf import DictConfig
 
-from wanderland_nav.compose.cli import CONF_DIR, quote_overrides
+from wanderland_nav.cache import Ledger
+from wanderland_nav.compose.cli import quote_overrides
 from wanderland_nav.compose.schema import study_config
 from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.grounding_study.cells import StudyCells
-from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells, run_cells
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, plan_cells, run_cells
 from wanderland_nav.grounding_study.report import write_study_outputs
 from wanderland_nav.train import run as train_run
 
@@ -38,9 +38,9 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     out = Path(c.out)
     cells = plan_cells(c.study)
     execute = StudyCells(c, out, train_run, cells)
-    execute.check_trained_recipes(Manifest(out / MANIFEST))  # a stale policy is refused, never reused
+    execute.check_trained_recipes(Ledger(out / MANIFEST))  # a stale policy is refused, never reused
     # report_only: the tables of what other study processes have finished so far, running no cell
-    manifest = Manifest(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
+    manifest = Ledger(out / MANIFEST) if c.report_only else run_cells(c, cells, execute, out)
     meshes = {env: execute.env_path(env) / "collision_mesh.ply" for env in (GROUNDED, *c.study.presets)}
     s = c.study
     # line 1 is also the chart's title: what the figure shows, not how long this invocation took
@@ -55,17 +55,7 @@ def run(cfg: DictConfig) -> dict[str, Path]:
     return write_study_outputs(c, out, cells, manifest, meshes, header)
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="study")
-def hydra_main(cfg: DictConfig) -> None:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
-                        force=True)
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-study` and `python -m wanderland_nav.study`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + quote_overrides(sys.argv[1:])  # a path Hydra's lexer refuses is quoted for it
-    hydra_main()
+main = entry_point("study", run, argv=quote_overrides, before=log_to_stdout)
 
 
 if __name__ == "__main__":

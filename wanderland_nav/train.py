@@ -8,25 +8,19 @@ Starting the same command again resumes; a run folder of another configuration o
 
 from __future__ import annotations
 
-import logging
-import sys
-import time
-from contextlib import nullcontext
-from pathlib import Path
+from wanderland_nav.app import entry_point, log_to_stdout  # first: it readies the process (see app.py)
 
-import hydra
+import logging
+import time
+
 from omegaconf import DictConfig, OmegaConf
 
 from wanderland_nav.atomic import atomic_write_text
-from wanderland_nav.compose import CONF_DIR, scene_overrides, typed_config
+from wanderland_nav.compose import typed_config
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.compose.training import training_recipe
-from wanderland_nav.envs.evaluation import PolicyActor
-from wanderland_nav.envs.recording import evaluate_and_record
-from wanderland_nav.rl.blank_camera import camera_paused
+from wanderland_nav.evaluation.tables import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
 from wanderland_nav.rl.recipe import run_recipe
-from wanderland_nav.report import BLANK_CAMERA, SAMPLED, comparison_table, row_estimates, successive_pairs
-from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 from wanderland_nav.viz.curves import write_learning_curves
 
 log = logging.getLogger("wanderland_nav.train")
@@ -38,24 +32,7 @@ def run(cfg: DictConfig) -> dict:
     c: TrainConfig = typed_config(cfg, TrainConfig)
     config = OmegaConf.to_container(cfg, resolve=True)
 
-    def evaluate(name, policy, env, step, logger, episodes_path, deterministic=None):
-        wants = bool(getattr(logger, "wants_rollouts", False))  # logger=rerun shows eval renders
-        actor = PolicyActor(policy, c.eval.deterministic if deterministic is None else deterministic, seed=c.seed)
-        if isinstance(env, SceneSetEvaluation):  # rows overall, indoor/outdoor and scene/<id>
-            if c.save_rollouts or wants:
-                log.warning("eval %s: rollouts are recorded for single scenes only, not for a scene set", name)
-            res = env.run(actor, c.eval.episodes, seed=c.seed, name=name,
-                          progress=c.progress)
-            log.info("eval %s per scene:\n%s", name, res.table)
-            return res
-        path = Path(c.save_rollouts) / f"{name.replace('+', '_')}.npz" if c.save_rollouts else None
-        with nullcontext() if path or wants else camera_paused(env, policy):
-            return evaluate_and_record(env, actor, path, num_episodes=c.eval.episodes,
-                                       seed=c.seed, name=name, frames=wants, progress=c.progress,
-                                       logger=logger if wants else None, step=step,
-                                       episodes_path=episodes_path)
-
-    recipe, scene = training_recipe(c, config, evaluate)
+    recipe, scene = training_recipe(c, config)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
     shown = rows + [r + tag for tag in (SAMPLED, BLANK_CAMERA) for r in rows if r + tag in results]  # eval.*_rows
@@ -73,21 +50,11 @@ def run(cfg: DictConfig) -> dict:
     print(header)
     print(table, flush=True)
     recipe.logger.close()
-    recipe.eval_env.close()
+    recipe.evaluator.close()
     return {r: results[r]["summary"]["overall"] for r in rows}
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
-def hydra_main(cfg: DictConfig) -> None:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stdout,
-                        force=True)
-    run(cfg)
-
-
-def main() -> None:
-    """`wanderland-train` and `python -m wanderland_nav.train`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("train", run, before=log_to_stdout)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from wanderland_nav.scene.district import make_district  # noqa: E402
 def prepared(root: Path, seed: int):
     from wanderland_nav.compose import compose_config
     from wanderland_nav.compose.schema import PrepareConfig, typed_config
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     path = make_district(root / f"s{seed}_small", seed=seed, size="small")
     nav = typed_config(compose_config("prepare", []), PrepareConfig).navigation

@@ -35,7 +35,7 @@ def one(root: Path, seed: int, n_episodes: int) -> dict:
     from wanderland_nav.compose.schema import PrepareConfig, typed_config
     from wanderland_nav.episodes.generate import GeneratorSettings, generate_episodes
     from wanderland_nav.scene.district import make_district
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     t0 = time.process_time()
     path = make_district(root / f"s{seed}_small", seed=seed, size="small")

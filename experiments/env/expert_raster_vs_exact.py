@@ -19,7 +19,7 @@ import torch
 
 def evaluate(scene, navmesh, batch: int, exact: bool):
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
-    from wanderland_nav.envs.evaluation import run_evaluation
+    from wanderland_nav.evaluation.loop import run_evaluation
     from wanderland_nav.envs.factory import make_nav_env
 
     cfg = NavEnvConfig()

@@ -28,7 +28,7 @@ def main():
     torch.set_num_threads(1)
     from planners import NavMesh
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
-    from wanderland_nav.envs.evaluation import run_evaluation
+    from wanderland_nav.evaluation.loop import run_evaluation
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes import load_episodes
     from wanderland_nav.scene.loader import load_scene

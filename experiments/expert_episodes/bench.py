@@ -17,7 +17,7 @@ import torch
 
 from planners import NavMesh
 from wanderland_nav.episodes.generate import GeneratorSettings, generate_episodes
-from wanderland_nav.scene_preparation import ensure_demo_scene
+from wanderland_nav.preparation.scene import ensure_demo_scene
 
 
 def main():

@@ -28,7 +28,7 @@ from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.episodes.generate import GeneratorSettings, generate_episodes
 from wanderland_nav.render import render
 from wanderland_nav.render.lod import load_splat
-from wanderland_nav.scene_preparation import ensure_demo_scene
+from wanderland_nav.preparation.scene import ensure_demo_scene
 from wanderland_nav.viz.topdown import plot_topdown
 
 matplotlib.use("Agg")

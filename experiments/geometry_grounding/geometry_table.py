@@ -31,7 +31,7 @@ STOCHASTIC = {"drift", "holes", "video3dgs"}
 
 
 def _prepare(path):
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     return prepare_scene(path)
 

@@ -33,8 +33,9 @@ from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.compose.cli import compose_config
 from wanderland_nav.compose.schema import study_config
 from wanderland_nav.grounding_study.cells import StudyCells
-from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, Manifest, plan_cells
-from wanderland_nav.report import seed_table
+from wanderland_nav.cache import Ledger
+from wanderland_nav.grounding_study.plan import GROUNDED, MANIFEST, plan_cells
+from wanderland_nav.evaluation.tables import seed_table
 
 
 TRACKED = "BC+RL tracked"  # the phase label of the new (tracked-target) PPO's policies in the misranking grid
@@ -87,7 +88,7 @@ def _eval_routes(ex: StudyCells, env: str, seed: int, world: str, root: Path) ->
     return result
 
 
-def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list[str], seeds: list[int],
+def misranking(ex: StudyCells, manifest: Ledger, envs: list[str], worlds: list[str], seeds: list[int],
                root: Path) -> str:
     """The study's misranking test (same routes, Kendall tau-b per seed and mean of seeds) with the new-PPO
     policies (`<env> BC+RL tracked`): once in place of the old PPO's BC+RL, once beside them."""
@@ -122,14 +123,14 @@ def misranking(ex: StudyCells, manifest: Manifest, envs: list[str], worlds: list
     return "\n\n".join(out)
 
 
-def _records(ex: StudyCells, manifest: Manifest, key: str):
+def _records(ex: StudyCells, manifest: Ledger, key: str):
     """The records of the study's eval cell `key` made with this study config's hash (another config's
     evaluation under the same key, e.g. `grounding_recipe`'s BC+RL, is not this one's)."""
     e = manifest.entry(key, ex.digests[key])
     return None if e is None or e["status"] != "done" else json.loads((Path(e["dir"]) / "result.json").read_text())["records"]
 
 
-def tables(ex: StudyCells, manifest: Manifest, envs: list[str], seeds: list[int], root: Path) -> str:
+def tables(ex: StudyCells, manifest: Ledger, envs: list[str], seeds: list[int], root: Path) -> str:
     new = {(env, s): json.loads(p.read_text())["records"] for env in envs for s in seeds
            if (p := root / "eval" / f"{env}_seed{s}.json").is_file()}
     done = [s for s in seeds if all((env, s) in new for env in envs)]
@@ -160,7 +161,7 @@ def main() -> int:
     if c.threads:
         torch.set_num_threads(c.threads)
     ex = StudyCells(c, Path(c.out), None, plan_cells(c.study))
-    manifest = Manifest(Path(c.out) / MANIFEST)
+    manifest = Ledger(Path(c.out) / MANIFEST)
     envs = [GROUNDED, *(p for p in c.study.presets if c.study.trained_presets is None or p in c.study.trained_presets)]
     for seed in ([] if args.report_only else c.study.seeds):  # whole seeds first: a run cut short has whole rows
         for env in envs:

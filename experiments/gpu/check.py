@@ -40,7 +40,7 @@ def scene_parts(device: str):
     """The main job's scene (the tiny demo, built and prepared on first use) at training's level of detail."""
     from planners import NavMesh
     from wanderland_nav.render.lod import load_splat
-    from wanderland_nav.scene_preparation import ensure_demo_scene
+    from wanderland_nav.preparation.scene import ensure_demo_scene
 
     scene = ensure_demo_scene(ROOT / "data" / "scenes" / "demo_tiny", seed=0, preset="tiny")
     if scene.episodes_path is None:

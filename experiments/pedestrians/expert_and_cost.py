@@ -17,7 +17,7 @@ from pathlib import Path
 
 from planners import NavMesh
 from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.episodes.generate import write_scene_episodes
@@ -25,7 +25,7 @@ from wanderland_nav.render.lod import load_splat
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.demo import make_demo_scene
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation.scene import prepare_scene
 
 
 def demo(root: Path, episodes: int):

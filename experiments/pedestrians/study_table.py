@@ -17,7 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
-from wanderland_nav.report import SOCIAL_COLUMNS, TABLE_COLUMNS, seed_table
+from wanderland_nav.evaluation.tables import SOCIAL_COLUMNS, TABLE_COLUMNS, seed_table
 
 
 def load(folder: Path) -> tuple[int, list[list[dict]]]:

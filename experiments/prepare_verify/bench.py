@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation.scene import prepare_scene
 from wanderland_nav.scene.collision import CollisionSettings
 
 

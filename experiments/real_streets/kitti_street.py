@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from wanderland_nav.episodes.generate import GeneratorSettings, generate_episodes
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation.scene import prepare_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.viz.topdown import plot_topdown
 

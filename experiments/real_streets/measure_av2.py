@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from wanderland_nav.scene_preparation import prepare_scene
+from wanderland_nav.preparation.scene import prepare_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.types import points_in_polygon
 

@@ -34,7 +34,7 @@ def main() -> None:
     from wanderland_nav.compose.cli import compose_config
     from wanderland_nav.compose.schema import TrainConfig
     from wanderland_nav.compose.training import _single_scene
-    from wanderland_nav.envs.evaluation import PolicyActor, run_evaluation
+    from wanderland_nav.evaluation.loop import PolicyActor, run_evaluation
 
     print(f"load average {os.getloadavg()}, threads {a.threads}")
     reference = None

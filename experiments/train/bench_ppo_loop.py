@@ -70,7 +70,7 @@ def main() -> None:
     with initialize_config_dir(config_dir=str(root / "conf"), version_base="1.3"):
         cfg = compose("train", overrides=overrides)
     c = typed_config(cfg, TrainConfig)
-    recipe, _ = training_recipe(c, OmegaConf.to_container(cfg, resolve=True), evaluate=None)
+    recipe, _ = training_recipe(c, OmegaConf.to_container(cfg, resolve=True))
     log = TimingLogger()
     trainer = PPOTrainer(recipe.policy, recipe.env_fn, recipe.ppo, logger=log, checkpointer=None,
                          num_workers=recipe.num_workers, seed=recipe.seed, progress=False,

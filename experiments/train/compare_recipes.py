@@ -20,7 +20,7 @@ import json
 import re
 from pathlib import Path
 
-from wanderland_nav.report import seed_table
+from wanderland_nav.evaluation.tables import seed_table
 
 
 def runs_by_seed(pattern: str) -> dict[int, dict]:

@@ -32,7 +32,7 @@ from tensordict import TensorDict
 
 from policies import make_policy
 from wanderland_nav import keys as K
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.pipeline import ensure_demo_scene
 from wanderland_nav.rl.bc import ExpertActor, ExpertPaths, collect

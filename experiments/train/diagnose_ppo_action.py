@@ -82,8 +82,8 @@ def build(checkpoint: str, seed: int, action_dist: str, warmup: int, extra: list
                  f"algo.ppo.action_dist={action_dist}", f"algo.ppo.critic_warmup_iters={warmup}", *extra]
     cfg = compose_config("train", overrides)
     c = typed_config(cfg, TrainConfig)
-    recipe, _ = training_recipe(c, OmegaConf.to_container(cfg, resolve=True), evaluate=None)
-    recipe.eval_env.close()
+    recipe, _ = training_recipe(c, OmegaConf.to_container(cfg, resolve=True))
+    recipe.evaluator.close()
     trainer = PPOTrainer(recipe.policy, recipe.env_fn, recipe.ppo, logger=Quiet(), seed=seed, progress=False,
                          kinematics=recipe.kinematics)
     return trainer, recipe.kinematics

@@ -27,8 +27,8 @@ from statistics import median
 
 import torch
 
-from wanderland_nav.report import CAUSE_COLUMNS
-from wanderland_nav.stats import rate_interval
+from wanderland_nav.evaluation.tables import CAUSE_COLUMNS
+from wanderland_nav.evaluation.stats import rate_interval
 
 SPLITS = ("train", "val", "test")
 LENGTH_BINS = ((0.0, 15.0), (15.0, 20.0), (20.0, 25.0), (25.0, float("inf")))  # metres of geodesic route

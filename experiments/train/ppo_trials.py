@@ -6,7 +6,7 @@ Each trial is a set of run folders `<root>/<trial>_s<seed>` (a `train` run with 
 `metrics.csv`, e.g. `+exp=citywalker_rl_long init_checkpoint=<bc.pt> eval.split=val`). Per trial:
 - per seed: the paired SR difference (last row - first row) over the same episodes with its bootstrap interval;
 - pooled over seeds: the mean of the per-seed paired differences with a two-level bootstrap
-  (`wanderland_nav.stats.paired_difference` on `[S, N]`);
+  (`wanderland_nav.evaluation.stats.paired_difference` on `[S, N]`);
 - from metrics.csv, over the policy-update iterations: mean approx KL, clip fraction, actor epochs done
   (a target-KL stop ends a batch early), the critic's held-out explained variance over the second half,
   the exploration std at the end, and the training rollouts' SR in the first and last quarter.
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import torch
 
-from wanderland_nav.report import episode_scores
-from wanderland_nav.stats import paired_difference
+from wanderland_nav.evaluation.tables import episode_scores
+from wanderland_nav.evaluation.stats import paired_difference
 
 
 def iteration_table(metrics_csv: Path) -> dict[int, dict[str, float]]:

@@ -20,7 +20,7 @@ import json
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
-from wanderland_nav.report import TABLE_COLUMNS, seed_table, successive_pairs
+from wanderland_nav.evaluation.tables import TABLE_COLUMNS, seed_table, successive_pairs
 
 
 def row_records(spec: str) -> list[list[dict]]:

@@ -20,8 +20,8 @@ from pathlib import Path
 import torch
 
 from wanderland_nav.atomic import atomic_path
-from wanderland_nav.report import episode_scores
-from wanderland_nav.stats import bootstrap_interval
+from wanderland_nav.evaluation.tables import episode_scores
+from wanderland_nav.evaluation.stats import bootstrap_interval
 from wanderland_nav.viz.curves import PANELS, read_metrics
 
 

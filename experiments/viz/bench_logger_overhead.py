@@ -89,7 +89,7 @@ def main() -> None:
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-    from wanderland_nav.scene_preparation import ensure_demo_scene
+    from wanderland_nav.preparation.scene import ensure_demo_scene
     from wanderland_nav.viz.rerun_logger import RerunLogger
 
     scene = ensure_demo_scene(Path("data/scenes/demo_tiny"), preset="tiny")
@@ -169,8 +169,8 @@ def main() -> None:
     # one eval phase: the plain evaluation's CPU time vs the CPU time spent inside recording and logging
     # (measured around those calls: an end-to-end difference is buried in the shared machine's noise)
     from wanderland_nav.envs import ExpertPolicy
-    from wanderland_nav.envs.evaluation import run_evaluation
-    from wanderland_nav.envs.recording import RecordingEnv, RolloutRecorder
+    from wanderland_nav.evaluation.loop import run_evaluation
+    from wanderland_nav.evaluation.recording import RecordingEnv, RolloutRecorder
 
     class TimedRecorder(RolloutRecorder):
         spent = 0.0

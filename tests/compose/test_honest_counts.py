@@ -58,7 +58,7 @@ def test_an_unknown_policy_key_is_refused_naming_the_nearest(prepared_demo_scene
                                    "height_max", "personal_space_penalty"])
 @pytest.mark.parametrize("value", [math.nan, math.inf])
 def test_pedestrian_settings_are_finite_and_in_range(field, value):
-    from wanderland_nav.envs.pedestrian_config import RANGES, PedestrianConfig
+    from wanderland_nav.envs.pedestrians.config import RANGES, PedestrianConfig
 
     with pytest.raises(ValueError, match=rf"pedestrians\.{field}: invalid value {value!r} \(expected a finite number"):
         PedestrianConfig(**{field: value}).validate()

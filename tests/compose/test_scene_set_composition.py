@@ -34,13 +34,12 @@ def set_overrides(root) -> list[str]:
 def test_train_recipe_over_a_set_steps_and_clones_every_scene(linked_set, tmp_path):
     from wanderland_nav.compose.training import training_recipe
     from wanderland_nav.envs.multi_scene import MultiSceneNavEnv
-    from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 
     cfg = compose_config("train", ["+exp=citywalker_rl", "debug=smoke", "collector=ray", f"run_dir={tmp_path / 'run'}",
                                    "render.lod_px=4", *set_overrides(linked_set)])
     c = typed_config(cfg, TrainConfig)
-    recipe, scene = training_recipe(c, {"seed": 0}, evaluate=None)
-    assert isinstance(recipe.eval_env, SceneSetEvaluation) and recipe.eval_env.scene_ids == ["a", "b"]
+    recipe, scene = training_recipe(c, {"seed": 0})
+    assert recipe.evaluator.per_scene and list(recipe.evaluator.scenes) == ["a", "b"]
     assert sorted(recipe.identity["scene"]["scenes"]) == ["a", "b"]
     assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None,
                             "sync_timeout_s": 600.0, "worker_niceness": 0}
@@ -69,7 +68,7 @@ def test_evaluate_expert_over_a_set_has_a_row_per_scene(linked_set, tmp_path):
 
 
 def test_scene_set_preparation_uses_the_composed_navigation_group():
-    from wanderland_nav.prepare_set import jobs_for
+    from wanderland_nav.preparation.scene_set import jobs_for
     from wanderland_nav.scene.sets import demo_scene_set
 
     s = demo_scene_set("/tmp/unused", seeds=[0])

@@ -153,7 +153,7 @@ def splat_and_identity_reports(prepared_demo_scene, demo_episodes, tmp_path_fact
     from wanderland_nav.degrade import degradation_report
     from wanderland_nav.episodes.schema import load_episodes
     from wanderland_nav.scene.collision import CollisionSettings
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     root = tmp_path_factory.mktemp("degraded")
     grounded = load_scene(prepared_demo_scene)

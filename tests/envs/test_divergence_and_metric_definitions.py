@@ -13,7 +13,8 @@ import torch
 from env_fakes import FakeField, FakeNavMesh, FakeRenderer, FakeScene, make_episode
 
 from wanderland_nav import keys
-from wanderland_nav.envs import NavEnv, NavEnvConfig, aggregate_metrics
+from wanderland_nav.envs import NavEnv, NavEnvConfig
+from wanderland_nav.evaluation.metrics import aggregate_metrics
 from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 
@@ -106,7 +107,7 @@ def test_ne_is_euclidean_distance_to_goal_is_geodesic_and_spl_lengths_are_horizo
 
 
 def test_report_table_has_both_distances():
-    from wanderland_nav.report import comparison_table
+    from wanderland_nav.evaluation.tables import comparison_table
 
     def recs(ne, dtg):  # two episodes: Euclidean NE and geodesic distance_to_goal per episode
         return [{"episode_id": i, "navigation_error": ne + i, "distance_to_goal": dtg + i, "success": i == 0,

@@ -9,9 +9,9 @@ import torch
 
 from wanderland_nav.envs.config import KinematicsConfig, NavEnvConfig, RewardConfig, TerminationConfig
 from wanderland_nav.envs.kinematics import integrate_unicycle, plan_motion, select_waypoint
-from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table, spl
-from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, intervention_cause, navigation_reward,
-                                         terminations, update_progress)
+from wanderland_nav.envs.rewards import ProgressState, intervention_cause, navigation_reward, terminations, update_progress
+from wanderland_nav.evaluation.metrics import (INTERVENTION_CAUSES, EpisodeMetrics, aggregate_metrics, format_table,
+                                               spl)
 
 
 # ---------------------------------------------------------------- config

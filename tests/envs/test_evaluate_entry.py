@@ -7,9 +7,10 @@ import json
 import pytest
 
 from wanderland_nav.compose import compose_config, typed_config
+from wanderland_nav.compose.evaluating import reference_policy
 from wanderland_nav.compose.schema import EvaluateConfig
 from wanderland_nav.envs import NavEnvConfig
-from wanderland_nav.evaluate import reference_policy, run
+from wanderland_nav.evaluate import run
 
 # the session fixtures prepare at 0.25 m voxels; the same setting keeps their artefacts (no rebake)
 FIXTURE_NAV = "navigation.collision.voxel_size=0.25"
@@ -54,7 +55,7 @@ def test_rollout_records_the_episodes_file_used_and_no_blank_frames(prepared_dem
     a camera that is off stores no 8x8 placeholder frames."""
     import shutil
 
-    from wanderland_nav.rollouts import load_rollout
+    from wanderland_nav.evaluation.rollouts import load_rollout
 
     other = tmp_path / "elsewhere" / "my_episodes.json"
     other.parent.mkdir()

@@ -9,7 +9,7 @@ from torchrl.envs.utils import check_env_specs
 
 from wanderland_nav import keys
 from wanderland_nav.envs import ExpertPolicy, NavEnvConfig, RandomPolicy
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.factory import make_nav_env
 
 

@@ -13,9 +13,10 @@ from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
 from wanderland_nav import keys
-from wanderland_nav.envs import ExpertPolicy, NavEnv, NavEnvConfig, RandomPolicy, aggregate_metrics
+from wanderland_nav.envs import ExpertPolicy, NavEnv, NavEnvConfig, RandomPolicy
+from wanderland_nav.evaluation.metrics import aggregate_metrics
 from wanderland_nav.envs.camera import group_size
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 
 
 def small_config(**kin):
@@ -307,7 +308,7 @@ def test_sampled_evaluation_actor_is_seeded_and_restarts_its_noise_at_reset():
     """eval.deterministic=false: the same evaluation twice gives the same samples (own generator, re-seeded)."""
     from tensordict import TensorDict
 
-    from wanderland_nav.envs.evaluation import PolicyActor
+    from wanderland_nav.evaluation.loop import PolicyActor
 
     class Mean(torch.nn.Module):  # select_action as NavPolicy's: loc, or loc + scale * randn(generator)
         def __init__(self):
@@ -335,7 +336,7 @@ def test_sampled_evaluation_actor_is_seeded_and_restarts_its_noise_at_reset():
 
 def test_blank_camera_evaluation_skips_rendering_and_keeps_every_record():
     from policies import make_policy
-    from wanderland_nav.envs.evaluation import PolicyActor
+    from wanderland_nav.evaluation.loop import PolicyActor
     from wanderland_nav.rl.blank_camera import BlankCamera, camera_paused
 
     torch.manual_seed(0)

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from wanderland_nav import keys
-from wanderland_nav.envs.crowd import Crowd
-from wanderland_nav.envs.pedestrian_config import PedestrianConfig
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
+from wanderland_nav.envs.pedestrians.crowd import Crowd
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_people_keep_away_from_a_standing_robot(demo):
 
 
 def test_body_gaussians_project_where_the_person_stands(demo):
-    from wanderland_nav.envs.pedestrian_bodies import PARTS
+    from wanderland_nav.envs.pedestrians.bodies import PARTS
     from wanderland_nav.geometry import invert_rigid, pinhole_intrinsics
     from wanderland_nav.render.gaussians import Gaussians
     from wanderland_nav.render import render
@@ -165,7 +165,7 @@ def test_a_person_on_the_robot_is_an_intervention_with_its_own_cause(demo):
                                [m0.min_person_distance, m1.min_person_distance], rtol=1e-6)
     np.testing.assert_allclose(td[keys.EPISODE_PATH_IRREGULARITY].flatten().numpy(),
                                [m0.path_irregularity, m1.path_irregularity], rtol=1e-5)
-    from wanderland_nav.report import comparison_table
+    from wanderland_nav.evaluation.tables import comparison_table
 
     table = comparison_table({"x": [m0.to_dict(), m1.to_dict()]})
     assert "person_collisions" in table.split("\n")[0] and "min_person_distance" in table
@@ -183,8 +183,8 @@ def test_people_are_recorded_and_replayed_as_moving_points(demo, tmp_path):
     import rerun as rr
 
     from wanderland_nav.envs import ExpertPolicy
-    from wanderland_nav.envs.recording import record_evaluation
-    from wanderland_nav.rollouts import load_rollout
+    from wanderland_nav.evaluation.recording import record_evaluation
+    from wanderland_nav.evaluation.rollouts import load_rollout
     from wanderland_nav.viz.recording import write_recording
 
     env = _env(demo, count=4)
@@ -231,7 +231,7 @@ def test_the_expert_waits_for_a_person_ahead_not_behind(demo):
 
 
 def test_two_people_walking_head_on_pass_each_other_without_overlap():
-    from wanderland_nav.envs.social_force import integrate
+    from wanderland_nav.envs.pedestrians.social_force import integrate
 
     cfg = PedestrianConfig(count=2)
     pos = torch.tensor([[[-4.0, 0.05], [4.0, -0.05]]])
@@ -287,7 +287,7 @@ def test_a_person_passing_a_robot_by_the_boundary_does_not_walk_into_it(rule, mo
     (0.9 m) leaves a person no room to pass, the person walking toward it. The old rule (the robot repelled only as
     a person is, the boundary slide taken as it comes) squeezes the person past into contact; with the robot's
     obstacle repulsion and the stop of a slide that would end at the robot, the person waits clear of it."""
-    import wanderland_nav.envs.crowd as crowd_module
+    import wanderland_nav.envs.pedestrians.crowd as crowd_module
 
     cfg = PedestrianConfig(count=1, pause_probability=0.0)
     if rule == "old":
@@ -306,3 +306,20 @@ def test_a_person_passing_a_robot_by_the_boundary_does_not_walk_into_it(rule, mo
     else:
         assert closest > contact + 0.05, closest
         assert float(crowd.pos[0, 0, 0]) < 0.0  # still on its side: it waited rather than pushed past
+
+
+def test_no_people_is_a_component_whose_hooks_change_nothing():
+    from pathlib import Path
+
+    import wanderland_nav.envs.nav_env as nav_env_module
+    from wanderland_nav.envs.pedestrians.component import NoPedestrians, make_pedestrians
+
+    none = make_pedestrians(PedestrianConfig(count=0), None, None, None, 2, 0.5, "cpu")
+    assert isinstance(none, NoPedestrians) and none.crowd is None and none.episode_keys == ()
+    flags = [torch.tensor([True, False]), torch.tensor([False, True]), torch.tensor([False, False]), torch.tensor([0, 2])]
+    out = none.step(torch.zeros(2, 3), torch.zeros(2, 3), torch.zeros(2), *flags)
+    assert all(a is b for a, b in zip(out[:3], flags[1:])) and out[3] == 0.0
+    assert none.gaussians(None, "cpu") is None and none.finished_columns(torch.arange(2)) == {}
+    # the env's body asks the component, never whether there is a crowd
+    body = Path(nav_env_module.__file__).read_text()
+    assert "crowd is" not in body and "social is" not in body and "pedestrians.count" not in body

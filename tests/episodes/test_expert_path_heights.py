@@ -85,7 +85,7 @@ def test_reference_paths_on_the_demo(prepared_demo_scene):
 @pytest.mark.slow  # ~8 s: a second bake of the demo
 def test_a_robot_scale_agent_has_no_step_above_its_climb(prepared_demo_scene):
     """`navigation=habitat` (climbs 0.2 m): no reference path on the demo drops or climbs a ledge."""
-    from wanderland_nav.scene_preparation import load_collision_mesh
+    from wanderland_nav.preparation.scene import load_collision_mesh
 
     settings = _composed_agent("navigation=habitat")
     assert (settings.agent_radius, settings.agent_max_climb, settings.agent_height) == (0.1, 0.2, 1.5)

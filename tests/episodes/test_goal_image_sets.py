@@ -97,7 +97,7 @@ def test_no_episode_at_all_is_refused_with_the_navmesh_figures_and_nothing_writt
 
     from planners import NavMesh
     from wanderland_nav.episodes.generate import EmptyEpisodeSetError
-    from wanderland_nav.scene_preparation import load_collision_mesh
+    from wanderland_nav.preparation.scene import load_collision_mesh
 
     scene, nm = demo
     # an agent as wide as the walkways: what is left of the navmesh is crumbs no route fits on

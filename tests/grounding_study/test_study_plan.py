@@ -13,7 +13,8 @@ from wanderland_nav.compose.schema import study_config
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup
 from wanderland_nav.degrade.crosseval import (fig8, kendall_tau_b, rank_agreement, ranking_text, table3,
                                               unpaired_difference)
-from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, cell_inputs, plan_cells, run_cells
+from wanderland_nav.cache import Ledger
+from wanderland_nav.grounding_study.plan import GROUNDED, cell_digests, cell_inputs, plan_cells, run_cells
 
 
 def _config(tmp_path, **study) -> StudyConfig:
@@ -108,7 +109,7 @@ def test_run_cells_resumes_records_failures_and_blocks_dependants(tmp_path):
     assert m.entries["train/holes/seed0"]["status"] == "failed"
     assert "only {'test': 0} episodes" in m.entries["train/holes/seed0"]["error"]
     assert m.entries["eval/grounded/seed0/holes:BC"]["blocked_by"] == ["train/holes/seed0"]
-    assert Manifest(tmp_path / "done.json").entries == m.entries  # on disk after every cell
+    assert Ledger(tmp_path / "done.json").entries == m.entries  # on disk after every cell
 
     calls.clear()
     run_cells(c, cells, execute, tmp_path)
@@ -192,7 +193,7 @@ def test_a_train_cell_made_with_another_recipe_is_refused_not_reused(tmp_path):
     folder.mkdir(parents=True)
     recorded = OmegaConf.to_container(ex.train_config(GROUNDED, 0, run_dir=folder), resolve=True)
     recorded["scene"]["path"] = "/elsewhere/copy/of/the/scene"  # the cell's own: a copied study still matches
-    m = Manifest(tmp_path / "done.json")
+    m = Ledger(tmp_path / "done.json")
     m.record(key, {"hash": ex.digests[key], "status": "done", "dir": str(folder)})
     (folder / "config.yaml").write_text(yaml.safe_dump(recorded))
     ex.check_trained_recipes(m)

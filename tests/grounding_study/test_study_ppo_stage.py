@@ -17,7 +17,8 @@ from wanderland_nav.compose.schema import study_config
 from wanderland_nav.compose.study_config import StudyConfig, StudyGroup
 from wanderland_nav.degrade.crosseval import table3
 from wanderland_nav.grounding_study.cells import StudyCells
-from wanderland_nav.grounding_study.plan import GROUNDED, Manifest, cell_digests, plan_cells
+from wanderland_nav.cache import Ledger
+from wanderland_nav.grounding_study.plan import GROUNDED, cell_digests, plan_cells
 from wanderland_nav.grounding_study.report import cell_status_lines
 
 STAGE = ["algo.ppo.total_frames=1600", "algo.ppo.frames_per_batch=400", "algo.ppo.critic_warmup_iters=1"]
@@ -95,7 +96,7 @@ def test_ppo_cell_runs_train_from_the_bc_checkpoint_and_its_recipe_is_checked(tm
     assert ran[0].init_checkpoint == str(ex.cell_dir("train/grounded/seed0") / "checkpoints" / "bc.pt")
     assert ran[0].run_dir == str(folder)
     assert (info["ppo_frames"], info["ppo_policy_updates"], info["rows"]) == (1600, 3, {"BC+RL": {"SR": 0.5, "IR": 0.1}})
-    m = Manifest(tmp_path / "done.json")
+    m = Ledger(tmp_path / "done.json")
     m.record(key, {"hash": ex.digests[key], "status": "done", "dir": str(folder), "seconds": 12.0, "info": info})
     line = cell_status_lines(m, cells, ex.digests)[-1]
     assert line.startswith("  PPO stage from the train cell's BC in grounded (seed 0)") and "1600 PPO frames, 3 PPO" in line
@@ -114,7 +115,7 @@ def test_training_line_says_the_sampler_file_instead_of_none_asked(tmp_path):
     c = _config(tmp_path, seeds=[0])
     cells = plan_cells(c.study)
     digests = cell_digests(c, cells)
-    m = Manifest(tmp_path / "done.json")
+    m = Ledger(tmp_path / "done.json")
     key = "train/scale_1.2/seed0"
     info = {"episodes": {"train": 96, "val": 24, "test": 40}, "asked": None, "ppo_policy_updates": 2}
     m.record(key, {"hash": digests[key], "status": "done", "dir": "x", "seconds": 60.0, "info": info})

@@ -8,7 +8,6 @@ of 8 capture views at 32 px: experiments/render/README.md).
 from __future__ import annotations
 
 import math
-import os
 import shutil
 
 import numpy as np
@@ -166,11 +165,12 @@ def test_read_only_scene_keeps_its_hierarchy_in_the_user_cache(tmp_path, monkeyp
     scene = tmp_path / "scene"
     scene.mkdir()
     random_gaussians(200).save(scene / "3dgs.ply")
-    real_access = os.access  # root may write anywhere: the folder is made read-only for the loader alone
-    monkeypatch.setattr("wanderland_nav.render.lod.os.access",
-                        lambda p, mode: False if os.path.samefile(p, scene) else real_access(p, mode))
+    scene.chmod(0o555)  # no write bits: read-only by intent, even for root (who could write through them)
     monkeypatch.setenv("WANDERLAND_NAV_CACHE", str(tmp_path / "cache"))  # the one cache variable
-    load_splat(scene / "3dgs.ply", lod_px=1.0)
+    try:
+        load_splat(scene / "3dgs.ply", lod_px=1.0)
+    finally:
+        scene.chmod(0o755)
     assert not (scene / "3dgs.lod.npz").exists()
     assert len(list((tmp_path / "cache" / "lod").glob("*.lod.npz"))) == 1
 

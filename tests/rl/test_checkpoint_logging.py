@@ -12,7 +12,7 @@ from policies import make_policy
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights, save_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger, Logger
-from wanderland_nav.report import comparison_table, relative_change
+from wanderland_nav.evaluation.tables import comparison_table, relative_change
 
 
 def test_checkpoint_round_trip_and_errors(tmp_path):

@@ -51,7 +51,7 @@ def test_the_hostile_files_do_run_code_when_unpickled(tmp_path):
 
 
 def _loaders():
-    from wanderland_nav.compose.build import policy_from_checkpoint
+    from wanderland_nav.compose.checkpoints import policy_from_checkpoint
     from wanderland_nav.compose.schema import TrainConfig
     from wanderland_nav.compose.training import checked_run_dir
 
@@ -142,7 +142,7 @@ def test_saving_something_that_would_need_code_to_load_is_refused_naming_the_key
 
 
 def test_weights_that_do_not_fit_their_config_name_the_file_and_the_first_key(tmp_path):
-    from wanderland_nav.compose.build import policy_from_checkpoint
+    from wanderland_nav.compose.checkpoints import policy_from_checkpoint
 
     small = make_policy("cnn", image_size=(16, 16), feature_dim=32)
     config = {"policy": {"name": "cnn", "image_size": [16, 16], "feature_dim": 64}}  # edited after training

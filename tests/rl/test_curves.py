@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from wanderland_nav.viz.curves import read_metrics, write_learning_curves
-from wanderland_nav.stats import Estimate
+from wanderland_nav.evaluation.stats import Estimate
 
 
 def test_curves_png_from_logged_metrics(tmp_path):

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from wanderland_nav.report import load_seed_runs, main
+from wanderland_nav.evaluation.tables import load_seed_runs, main
 
 
 def _records(successes, ne0=10.0):
@@ -42,7 +42,7 @@ def test_seed_table_from_results_files(tmp_path, capsys):
 
 def test_main_job_table_shows_each_phases_paired_gain():
     """untrained -> BC -> BC+RL: beside the '- untrained' rows, 'BC+RL - BC' (the RL gain) with its interval."""
-    from wanderland_nav.report import comparison_table, successive_pairs
+    from wanderland_nav.evaluation.tables import comparison_table, successive_pairs
 
     rows = {"untrained": _records([0] * 40), "BC": _records([i % 2 for i in range(40)]),
             "BC+RL": _records([int(i % 4 != 0) for i in range(40)])}
@@ -58,10 +58,7 @@ def test_main_job_table_shows_each_phases_paired_gain():
 
 def test_ir_by_cause_columns_from_records(tmp_path, capsys):
     """`--columns IR IR_stuck ...`: the intervention rate split by the rule that ended each episode."""
-    from wanderland_nav.envs.rewards import INTERVENTION_CAUSES
-    from wanderland_nav.report import CAUSE_COLUMNS
-
-    assert tuple(CAUSE_COLUMNS.values()) == INTERVENTION_CAUSES  # report spells the env's cause names
+    from wanderland_nav.evaluation.tables import CAUSE_COLUMNS
     causes = ["stuck"] * 10 + ["no_progress"] * 5 + [""] * 25
     recs = [{**r, "intervention": bool(c), "intervention_cause": c} for r, c in zip(_records([0] * 40), causes)]
     p = tmp_path / "results.json"
@@ -75,7 +72,7 @@ def test_ir_by_cause_columns_from_records(tmp_path, capsys):
 
 def test_sampled_rows_pair_within_their_mode_and_against_bc():
     """eval.sampled_rows: each phase's gain per evaluation mode, and the trained policy sampled vs BC's mean."""
-    from wanderland_nav.report import successive_pairs
+    from wanderland_nav.evaluation.tables import successive_pairs
 
     rows = ["untrained", "untrained sampled", "BC", "BC sampled", "BC+RL", "BC+RL sampled"]
     assert successive_pairs(rows) == [("BC", "untrained"), ("BC+RL", "BC"), ("BC sampled", "untrained sampled"),
@@ -85,7 +82,7 @@ def test_sampled_rows_pair_within_their_mode_and_against_bc():
 
 
 def test_blank_camera_rows_pair_with_their_own_row_only():
-    from wanderland_nav.report import successive_pairs
+    from wanderland_nav.evaluation.tables import successive_pairs
 
     rows = ["untrained", "BC", "BC+RL", "BC blank camera", "BC+RL blank camera", "RL blank camera"]
     assert successive_pairs(rows) == [("BC", "untrained"), ("BC+RL", "BC"), ("BC blank camera", "BC"),

@@ -20,18 +20,21 @@ from wanderland_nav.rl.recipe import Recipe, eval_prefix, logged_before, run_rec
 pytestmark = pytest.mark.usefixtures("one_thread")
 
 
-def _evaluate(name, policy, env, step, deterministic=None):
-    o = {"NE": 1.0, "SR": 0.5, "SPL": 0.4, "IR": 0.1, "episodes": 4}
-    return SimpleNamespace(summary={"overall": o}, records=[])
+class _Evaluator:
+    per_scene = False
+
+    def evaluate(self, policy, name, step, deterministic=None):
+        o = {"NE": 1.0, "SR": 0.5, "SPL": 0.4, "IR": 0.1, "episodes": 4}
+        return SimpleNamespace(summary={"overall": o}, records=[])
 
 
 def _recipe(run_dir, logger):
     torch.manual_seed(0)
-    return Recipe(policy=make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32), eval_env=None,
+    return Recipe(policy=make_policy("cnn", image_size=(16, 16), context=2, feature_dim=32), evaluator=_Evaluator(),
                   env_fn=lambda: FakeNavEnv((4,)), nav_from_scene=None, bc=None,
                   ppo=PPOConfig(total_frames=96, frames_per_batch=32, minibatch_size=16, epochs=1, lr=1e-4,
                                 critic_warmup_iters=0, critic_epochs=10, overlap=False),
-                  evaluate=_evaluate, logger=logger, run_dir=run_dir, config={}, identity={"hash": "h" * 64},
+                  logger=logger, run_dir=run_dir, config={}, identity={"hash": "h" * 64},
                   progress=False, kinematics=KinematicsConfig())
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from wanderland_nav.prepare_set import SceneJob, jobs_for, prepare_one, run_batch
+from wanderland_nav.preparation.scene_set import SceneJob, jobs_for, prepare_one, run_batch
 from wanderland_nav.scene.sets import demo_scene_set
 
 

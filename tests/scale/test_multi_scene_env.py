@@ -10,7 +10,8 @@ from torchrl.envs.utils import check_env_specs
 
 from wanderland_nav import keys
 from wanderland_nav.envs import NavEnvConfig
-from wanderland_nav.envs.multi_scene import SCENE_INDEX, MultiSceneNavEnv, SceneLRU, aggregate_by_scene, measure_bytes
+from wanderland_nav.envs.multi_scene import SCENE_INDEX, MultiSceneNavEnv, SceneLRU, measure_bytes
+from wanderland_nav.evaluation.metrics import aggregate_by_scene
 
 SCENES = ["a", "b", "c"]
 ENVIRONMENT = {"a": "indoor", "b": "outdoor", "c": "outdoor"}

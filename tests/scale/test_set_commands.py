@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from wanderland_nav import prepare_set
+from wanderland_nav.preparation import scene_set as prepare_set
 from wanderland_nav.compose import compose_config
 
 

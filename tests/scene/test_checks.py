@@ -47,7 +47,7 @@ def test_level_cameras_vote_for_their_up(caplog, one_scan):
 
 
 def test_prepare_refuses_an_empty_navmesh_and_keeps_the_cached_one(one_scan):
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     small = CollisionSettings(crop_radius=8.0)
     good = prepare_scene(one_scan, collision=small).navmesh_path

@@ -19,7 +19,7 @@ def _listing(root: Path) -> list[str]:
 def test_a_read_only_scene_writes_its_products_to_the_cache_folder(tiny_demo_scene, tmp_path, monkeypatch):
     from wanderland_nav.compose.scene import scene_episodes
     from wanderland_nav.episodes.generate import GeneratorSettings
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     ro = tmp_path / "share" / "demo_tiny"
     shutil.copytree(tiny_demo_scene, ro)

@@ -34,7 +34,7 @@ def kitti_street(tmp_path_factory, shared_data):
 
 @pytest.fixture(scope="module")
 def prepared_street(kitti_street):
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     return prepare_scene(kitti_street, collision=CollisionSettings(crop_radius=10.0))
 
@@ -72,7 +72,7 @@ def test_navmesh_covers_the_road_under_the_sensor_path(prepared_street):
 def test_expert_episodes_without_splats_and_expert_success(prepared_street, tmp_path, caplog):
     from planners import NavMesh
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
-    from wanderland_nav.envs.evaluation import run_evaluation
+    from wanderland_nav.evaluation.loop import run_evaluation
     from wanderland_nav.envs.factory import make_nav_env
     from wanderland_nav.episodes.generate import write_scene_episodes
 

@@ -120,7 +120,7 @@ def test_v2_prepares_from_scene_ply_or_from_the_lidar(v2_scene, tmp_path, use_sc
     import shutil
 
     from planners import NavMesh
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     root = tmp_path / "s"
     shutil.copytree(v2_scene[0], root)

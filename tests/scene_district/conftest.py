@@ -27,7 +27,7 @@ def prepared_district(district_scene, tmp_path_factory):
     from wanderland_nav.compose import compose_config
     from wanderland_nav.compose.schema import PrepareConfig, typed_config
     from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
-    from wanderland_nav.scene_preparation import prepare_scene
+    from wanderland_nav.preparation.scene import prepare_scene
 
     dst = tmp_path_factory.mktemp("district_prepared") / district_scene.name
     shutil.copytree(district_scene, dst)

@@ -123,7 +123,7 @@ def test_episodes_of_the_papers_kind(prepared_district):
 def test_district_configs_key_folders_and_split_seeds():
     from wanderland_nav.compose import compose_config
     from wanderland_nav.compose.schema import PrepareConfig, typed_config
-    from wanderland_nav.prepare_set import jobs_for
+    from wanderland_nav.preparation.scene_set import jobs_for
     from wanderland_nav.scene.sets import scene_set_from_config
 
     a = typed_config(compose_config("prepare", ["scene=district", "scene.seed=7", "scene.size=paper"]), PrepareConfig)

@@ -15,8 +15,8 @@ import pytest
 import rerun as rr
 import torch
 
-from wanderland_nav.envs.recording import RecordingEnv, RolloutRecorder, record_evaluation
-from wanderland_nav.rollouts import Rollout, RolloutFormatError, load_rollout, save_rollout
+from wanderland_nav.evaluation.recording import RecordingEnv, RolloutRecorder, record_evaluation
+from wanderland_nav.evaluation.rollouts import Rollout, RolloutFormatError, load_rollout, save_rollout
 
 H = W = 24  # tiny camera: the CPU renderer stays well inside the test budget
 
@@ -236,7 +236,7 @@ def test_recorder_from_env_steps_and_tensordict(env, recorded, tmp_path):
     import torch as th
 
     from wanderland_nav.envs import ExpertPolicy
-    from wanderland_nav.envs.recording import rollout_from_tensordict
+    from wanderland_nav.evaluation.recording import rollout_from_tensordict
 
     pol = ExpertPolicy(env)
     rec = RolloutRecorder(env)

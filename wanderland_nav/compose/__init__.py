@@ -9,8 +9,8 @@ libraries never see a config.
 from __future__ import annotations
 
 from wanderland_nav.compose.build import (blind_env_config, env_factory, load_navmesh, make_logger,
-                                          make_policy_from_config, policy_from_checkpoint, scene_gaussians,
-                                          shaped_env_config)
+                                          make_policy_from_config, scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.checkpoints import policy_from_checkpoint, trained_policy
 from wanderland_nav.compose.cli import CONF_DIR, compose_config, scene_overrides
 from wanderland_nav.compose.identity import RunIdentityError, run_identity, scene_identity
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
@@ -19,4 +19,4 @@ from wanderland_nav.compose.schema import SCHEMAS, typed_config
 __all__ = ["CONF_DIR", "SCHEMAS", "RunIdentityError", "blind_env_config", "compose_config", "env_factory",
            "load_navmesh", "make_logger", "make_policy_from_config", "policy_from_checkpoint", "prepared_scene",
            "run_identity", "scene_episodes", "scene_gaussians", "scene_identity", "scene_overrides",
-           "shaped_env_config", "typed_config"]
+           "shaped_env_config", "trained_policy", "typed_config"]

@@ -1,5 +1,5 @@
 """Config parts -> objects: the env shaped to a policy, the camera's level-of-detail splat, env factories,
-loggers and policies rebuilt from checkpoints. Only `compose` and the entry points call these."""
+loggers and policies built from their config (from checkpoints: `compose.checkpoints`). Only `compose` and the entry points call these."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from wanderland_nav.envs.factory import make_nav_env
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.render import Gaussians
 from wanderland_nav.render.lod import load_splat
-from wanderland_nav.rl.checkpoint import fit_policy_weights, load_checkpoint
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
 from wanderland_nav.scene.checks import check_splat_visible
 from wanderland_nav import viz
@@ -132,15 +131,3 @@ def make_policy_from_config(policy_cfg: dict, device: str = "cpu"):
     check_policy_config(policy_cfg)
     kw = dict(policy_cfg)
     return make_policy(kw.pop("name"), **kw).to(device)
-
-
-def policy_from_checkpoint(path, device: str = "cpu"):
-    """Rebuild the policy a training checkpoint was made with (its stored config) and load its weights."""
-    ckpt = load_checkpoint(path)
-    pol = (ckpt.get("config") or {}).get("policy") or {}
-    if "name" not in pol:
-        raise ValueError(f"{path}: checkpoint config has no policy.name; cannot rebuild the policy")
-    policy = make_policy_from_config(pol, device)
-    fit_policy_weights(policy, ckpt["policy"], path)
-    policy.pretrained_from = str(path)
-    return policy.eval(), ckpt

@@ -1,7 +1,7 @@
 """Evaluate several trained checkpoints side by side (the paper's Table 3 layout).
 
-Each checkpoint is evaluated in the env it was trained in (its stored `env` / `render` config, shaped to
-its policy), on the same scene, split and episodes; the first checkpoint is the baseline of the paired
+Each checkpoint is evaluated in the env it was trained in (its policy card's `env` / `render`, shaped to
+its policy: `compose.checkpoints`), on the same scene, split and episodes; the first checkpoint is the baseline of the paired
 differences (with 95 % intervals) below the table. The pedestrians are the exception: they are a condition of
 the test, not of the policy, so the evaluation's `env.pedestrians` replaces every checkpoint's stored crowd
 (policies trained with and without people then meet the same people).
@@ -11,18 +11,16 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.build import env_factory, policy_from_checkpoint, scene_gaussians, shaped_env_config
+from wanderland_nav.compose.build import env_factory, scene_gaussians, shaped_env_config
+from wanderland_nav.compose.checkpoints import trained_policy
 from wanderland_nav.compose.scene_sets import scene_env_fn
-from wanderland_nav.compose.schema import typed_config
-from wanderland_nav.envs.config import NavEnvConfig
-from wanderland_nav.envs.evaluation import PolicyActor
-from wanderland_nav.envs.recording import evaluate_and_record
-from wanderland_nav.report import comparison_table
+from wanderland_nav.evaluation import EvalScene, Evaluator
+from wanderland_nav.evaluation.tables import comparison_table
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
-from wanderland_nav.rl.scene_sets import SceneSetEvaluation
 
 log = logging.getLogger(__name__)
 
@@ -34,14 +32,6 @@ def checkpoint_label(path: Path) -> str:
     if parts and parts[-1] == "checkpoints":
         parts = parts[:-1]
     return "/".join(parts[-2:]) if parts else p.stem
-
-
-def stored_env_config(conf: dict, path) -> NavEnvConfig:
-    """The env config a checkpoint was trained with, through the same schema as `train` (strict)."""
-    try:
-        return typed_config(conf.get("env") or {}, NavEnvConfig)
-    except Exception as e:  # an older checkpoint with keys this version no longer has
-        raise ValueError(f"{path}: stored env config does not fit this version: {e}") from e
 
 
 def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
@@ -61,33 +51,28 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
                          "evaluate one scene of the set with scene=<folder>")
     rows, results = {}, {}
     for path in paths:
-        policy, ckpt = policy_from_checkpoint(path, device)
-        conf = ckpt.get("config") or {}
-        render = conf.get("render") or {}
-        env_cfg = shaped_env_config(stored_env_config(conf, path), policy, render.get("image_size"))
+        trained = trained_policy(path, device)  # the policy and its env, from the checkpoint's card
+        policy = trained.policy
+        env_cfg = shaped_env_config(trained.env, policy, trained.image_size)
         if pedestrians is not None:
             if env_cfg.pedestrians.count != pedestrians.count:
                 log.info("%s: trained with %d pedestrians, evaluated with %d", path, env_cfg.pedestrians.count,
                          pedestrians.count)
             env_cfg = replace(env_cfg, pedestrians=pedestrians)
-        goal_kw = dict(goal_input=str(conf.get("goal_input") or "goal"),
-                       lookahead=float(conf.get("route_lookahead") or 3.0))  # as the checkpoint was trained
+        goal_kw = dict(goal_input=trained.goal_input, lookahead=trained.route_lookahead)  # as it was trained
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)
         if scene_set is not None:
-            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, lod_px=render.get("lod_px"))
-            res = SceneSetEvaluation(list(scene_set), envs, batch_size).run(PolicyActor(policy), num_episodes,
-                                                                            seed=seed, name=label, progress=progress)
+            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, lod_px=trained.lod_px)
+            scenes = {sid: EvalScene(make=partial(envs, sid, batch_size, seed)) for sid in scene_set}
         else:
-            g = scene_gaussians(scene, render.get("lod_px"), needed=env_cfg.camera.enabled)
-            env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
-                                             seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)()
-            rollout = (Path(save_rollouts) / f"{label.replace('/', '_').replace('+', '_')}.npz"
-                       if save_rollouts is not None else None)
-            res = evaluate_and_record(env, PolicyActor(policy), rollout, num_episodes=num_episodes, seed=seed,
-                                      name=label, frames=save_frames, progress=progress, episodes_path=episodes_path)
-            env.close()
+            g = scene_gaussians(scene, trained.lod_px, needed=env_cfg.camera.enabled)
+            make = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
+                                              seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)
+            scenes = {scene.name: EvalScene(make=make, episodes_path=episodes_path)}
+        res = Evaluator(scenes, per_scene=scene_set is not None, num_episodes=num_episodes, seed=seed,
+                        progress=progress, rollouts=save_rollouts, frames=save_frames).evaluate(policy, label)
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))
     return rows, results, table

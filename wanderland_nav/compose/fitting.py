@@ -15,7 +15,7 @@ from wanderland_nav.compose.schema import FitRunConfig
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.gsfit.lpips import LPIPS
 from wanderland_nav.scene import load_scene
-from wanderland_nav.scene_preparation import scene_inputs
+from wanderland_nav.preparation.scene import scene_inputs
 from wanderland_nav.viz.rerun_logger import RerunLogger
 
 log = logging.getLogger("wanderland_nav.fit")

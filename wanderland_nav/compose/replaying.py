@@ -7,10 +7,10 @@ from pathlib import Path
 
 from wanderland_nav.compose.schema import ReplayConfig
 from wanderland_nav.envs.camera import camera_intrinsics
-from wanderland_nav.envs.recording import expert_rollout, render_rollout_frames
+from wanderland_nav.evaluation.recording import expert_rollout, render_rollout_frames
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.render.lod import load_splat
-from wanderland_nav.rollouts import load_rollout
+from wanderland_nav.evaluation.rollouts import load_rollout
 from wanderland_nav.scene import load_scene
 
 

@@ -14,7 +14,7 @@ from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
 from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
 from wanderland_nav.scene import load_scene, make_demo_scene, make_generated_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
-from wanderland_nav.scene_preparation import check_navmesh_frame, prepare_scene
+from wanderland_nav.preparation.scene import check_navmesh_frame, prepare_scene
 
 log = logging.getLogger(__name__)
 

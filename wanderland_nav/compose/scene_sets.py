@@ -1,11 +1,11 @@
 """Config -> a prepared scene set and its per-scene env factory, for every entry point that takes `scene=<set>`.
 
 A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes. `run_set_jobs` is `prepare` and
-`make_episodes` over a set: one job per scene (in parallel, resumably: `wanderland_nav/prepare_set.py`)
+`make_episodes` over a set: one job per scene (in parallel, resumably: `wanderland_nav/preparation/scene_set.py`)
 with the same `navigation` settings the single-scene commands compose, so a `navigation.*` override
 reaches every scene and is part of the done-manifest key. `ready_scene_set` prepares the scenes a
 `train` / `evaluate` run needs (episodes made only where there are none), and `scene_env_fn` is the
-picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training, per-scene evaluation)
+picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training) and `evaluation.Evaluator` (per-scene evaluation)
 and the collector workers call.
 """
 
@@ -21,7 +21,7 @@ from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
-from wanderland_nav.prepare_set import BatchReport, jobs_for, prepare_scene_set, run_batch
+from wanderland_nav.preparation.scene_set import BatchReport, jobs_for, prepare_scene_set, run_batch
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.sets import scene_set_from_config
 
@@ -38,7 +38,7 @@ def set_root(s: SceneSetSettings) -> Path:
 
 
 def done_manifest(s: SceneSetSettings) -> Path:
-    """The set's record of finished scenes (`prepare_set.run_batch`), shared by every entry point."""
+    """The set's record of finished scenes (`preparation.scene_set.run_batch`), shared by every entry point."""
     return set_root(s) / "prepare_done.json"
 
 

@@ -1,4 +1,5 @@
-"""`train`'s composition: config -> a `Recipe` of loaded parts in an identity-checked run folder."""
+"""`train`'s composition: config -> a `Recipe` of loaded parts (its `Evaluator` among them) in an identity-checked
+run folder."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import torch
 
 from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
                                           make_policy_from_config, scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.policy_sources import released_weights
@@ -19,10 +21,11 @@ from wanderland_nav.compose.scene import prepared_scene, scene_episodes
 from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
 from wanderland_nav.compose.schema import TrainConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.evaluation import EvalScene, Evaluator
 from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights
 from wanderland_nav.rl.recipe import Recipe
 from wanderland_nav.rl.route_goal import GoalInputEnvFn
-from wanderland_nav.rl.scene_sets import SceneSetEvaluation, multi_scene_env_fn
+from wanderland_nav.rl.scene_sets import multi_scene_env_fn
 from wanderland_nav.scene import load_scene
 
 log = logging.getLogger("wanderland_nav.train")
@@ -46,7 +49,7 @@ def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
 
 
 def _single_scene(c: TrainConfig):
-    """(scene, episodes file, identity's scene part, env_cfg -> (eval_env, env_fn, bc_env_fn))."""
+    """(scene, identity's scene part, env_cfg -> (eval scenes, env_fn, bc_env_fn))."""
     scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
     if c.episodes.path is not None:
         scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
@@ -66,14 +69,14 @@ def _single_scene(c: TrainConfig):
         parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
                      gaussians=scene_gaussians(scene, c.render.lod_px, needed=env_cfg.camera.enabled))
         eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
-                                              batch_size=c.eval.batch_size, **parts), **goal)()
+                                              batch_size=c.eval.batch_size, **parts), **goal)()  # built once, kept
         train = partial(env_factory, scene, env_cfg=env_cfg, split=c.train_env.split,
                         batch_size=c.train_env.batch_size, **parts)
         bc_env_fn = GoalInputEnvFn(train(episodes_path), **goal)
         env_fn = GoalInputEnvFn(train(ppo_files), **goal) if len(ppo_files) > 1 else bc_env_fn
-        return eval_env, env_fn, bc_env_fn
+        return {scene.name: EvalScene(env=eval_env, episodes_path=episodes_path)}, env_fn, bc_env_fn
 
-    return scene, episodes_path, scene_identity(scene.root, episodes_path), envs
+    return scene, scene_identity(scene.root, episodes_path), envs
 
 
 def _scene_set(c: TrainConfig):
@@ -96,31 +99,33 @@ def _scene_set(c: TrainConfig):
                         memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)
         env_fn = multi()
         log.info("scene set: %d scenes, %d active at a time (BC and PPO)", len(paths), env_fn.keywords["num_active"])
-        eval_env = SceneSetEvaluation(list(paths), GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.eval.split,
-                                                                               **kw), **goal), c.eval.batch_size)
-        return eval_env, env_fn, multi(global_episodes=True)
+        eval_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.eval.split, **kw), **goal)
+        scenes = {sid: EvalScene(make=partial(eval_env, sid, c.eval.batch_size, c.seed)) for sid in paths}
+        return scenes, env_fn, multi(global_episodes=True)
 
-    return scene, None, scene_set_identity(paths), envs
+    return scene, scene_set_identity(paths), envs
 
 
-def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, object]:
+def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     """(Recipe, scene: the single scene, or a set's first). `config`: the resolved config as a plain dict
-    (stored in checkpoints); `evaluate(name, policy, env, step, logger, episodes_path)` runs one evaluation
-    (`env` is a `SceneSetEvaluation` for a scene set, `episodes_path` then None)."""
+    (stored in checkpoints)."""
     torch.manual_seed(c.seed)
     if c.threads:
         torch.set_num_threads(c.threads)
     check_policy_config(c.policy)  # a policy.* typo fails here, before any scene work
-    scene, episodes_path, scene_part, envs = _scene_set(c) if c.scene.set else _single_scene(c)
+    scene, scene_part, envs = _scene_set(c) if c.scene.set else _single_scene(c)
     identity = run_identity(config, scene_part)
     run_dir = checked_run_dir(c, identity)
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
     env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     t = time.perf_counter()
-    eval_env, env_fn, bc_env_fn = envs(env_cfg)
+    eval_scenes, env_fn, bc_env_fn = envs(env_cfg)
     log.info("eval env built in %.1fs", time.perf_counter() - t)
     logger = make_logger(c.logger, run_dir, scene)
+    evaluator = Evaluator(eval_scenes, per_scene=bool(c.scene.set), num_episodes=c.eval.episodes, seed=c.seed,
+                          deterministic=c.eval.deterministic, progress=c.progress, rollouts=c.save_rollouts,
+                          logger=logger)
     first = "untrained"
     if c.init_checkpoint:
         load_policy_weights(policy, c.init_checkpoint)
@@ -131,12 +136,10 @@ def training_recipe(c: TrainConfig, config: dict, evaluate) -> tuple[Recipe, obj
     elif getattr(policy, "pretrained_from", None) is None:
         log.info("policy %s: randomly initialised (no init_checkpoint)", c.policy.get("name"))
     bc = c.algo.bc if c.algo.bc.enabled and not c.init_checkpoint else None
-    recipe = Recipe(policy=policy, eval_env=eval_env, env_fn=env_fn, bc_env_fn=bc_env_fn,
+    recipe = Recipe(policy=policy, evaluator=evaluator, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
-                    evaluate=lambda name, pol, env, step, **kw: evaluate(name, pol, env, step, logger, episodes_path,
-                                                                         **kw),
-                    logger=logger, run_dir=run_dir, config=config, identity=identity, seed=c.seed,
-                    num_workers=c.collector.num_workers, ray=c.collector.ray_options(), progress=c.progress,
-                    first_row=first, kinematics=env_cfg.kinematics, sampled_rows=c.eval.sampled_rows,
-                    blank_camera_rows=c.eval.blank_camera_rows)
+                    logger=logger, run_dir=run_dir, config=config, card=policy_card(config, policy), identity=identity,
+                    seed=c.seed, num_workers=c.collector.num_workers, ray=c.collector.ray_options(),
+                    progress=c.progress, first_row=first, kinematics=env_cfg.kinematics,
+                    sampled_rows=c.eval.sampled_rows, blank_camera_rows=c.eval.blank_camera_rows)
     return recipe, scene

@@ -20,8 +20,8 @@ from typing import Mapping, Sequence
 
 import torch
 
-from wanderland_nav.report import FIELDS, estimate, seed_table
-from wanderland_nav.stats import Estimate
+from wanderland_nav.evaluation.tables import FIELDS, estimate, seed_table
+from wanderland_nav.evaluation.stats import Estimate
 
 GROUNDED = "grounded"
 

@@ -17,8 +17,8 @@ from typing import Mapping, Sequence
 
 import torch
 
-from wanderland_nav.report import estimate
-from wanderland_nav.stats import Estimate, paired_difference
+from wanderland_nav.evaluation.tables import estimate
+from wanderland_nav.evaluation.stats import Estimate, paired_difference
 
 from .crosseval import GROUNDED, kendall_tau_b, policy_label, ranking_text, scores_of
 

@@ -1,4 +1,4 @@
-"""TorchRL navigation environment: kinematics, camera, rewards/terminations, metrics, reference policies.
+"""TorchRL navigation environment: kinematics, camera, rewards/terminations, reference policies.
 
 `NavEnv` is the only stateful piece; everything else is a pure batched function or a small class
 so it can be tested and reused by the trainer, the evaluator and the benchmarks.
@@ -6,12 +6,10 @@ so it can be tested and reused by the trainer, the evaluator and the benchmarks.
 
 from wanderland_nav.envs.config import CameraConfig, KinematicsConfig, NavEnvConfig, RewardConfig, TerminationConfig
 from wanderland_nav.envs.experts import ExpertPolicy, RandomPolicy
-from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics, format_table
 from wanderland_nav.envs.nav_env import NavEnv
 
 __all__ = [
     "CameraConfig",
-    "EpisodeMetrics",
     "ExpertPolicy",
     "KinematicsConfig",
     "NavEnv",
@@ -19,6 +17,4 @@ __all__ = [
     "RandomPolicy",
     "RewardConfig",
     "TerminationConfig",
-    "aggregate_metrics",
-    "format_table",
 ]

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
-from wanderland_nav.envs.pedestrian_config import PedestrianConfig
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
 
 ACTION_MODES = ("waypoints", "velocity")
 CAMERA_MODELS = ("pinhole", "fisheye")

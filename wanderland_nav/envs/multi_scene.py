@@ -19,7 +19,7 @@ Per-scene assets are built lazily by `make_scene_env(scene_id, sub_batch, seed)`
 distance field, LOD Gaussians, episodes) and held in `SceneLRU`, whose budget counts the bytes of every
 tensor and array reachable from the env (`measure_bytes`); the least recently bound scene not in use is
 dropped first. Metrics come out per scene (`pop_finished_by_scene`) and are aggregated overall, per scene
-and indoor/outdoor (`aggregate_by_scene`); `samples_by_scene` counts the agent-steps taken in each scene.
+and indoor/outdoor (`evaluation.metrics.aggregate_by_scene`); `samples_by_scene` counts the agent-steps taken in each scene.
 
 `global_episodes=True` (behaviour cloning over a set): every scene is built once at construction to read
 its episodes (`scene_episodes`, kept; the envs themselves stay under the LRU budget), and the
@@ -41,7 +41,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from wanderland_nav import keys
-from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics
+from wanderland_nav.evaluation.metrics import EpisodeMetrics
 
 log = logging.getLogger(__name__)
 
@@ -280,11 +280,3 @@ class MultiSceneNavEnv(EnvBase):
     def pop_finished_metrics(self) -> list[EpisodeMetrics]:
         """All finished episodes (NavEnv's interface, for trainers that aggregate overall)."""
         return [m for ms in self.pop_finished_by_scene().values() for m in ms]
-
-
-def aggregate_by_scene(by_scene: dict[str, list[EpisodeMetrics]]) -> dict[str, dict[str, float]]:
-    """Rows `overall`, `indoor`, `outdoor` (over all scenes) and `scene/<id>` (one per scene)."""
-    rows = aggregate_metrics([m for ms in by_scene.values() for m in ms])
-    for sid in sorted(by_scene):
-        rows[f"scene/{sid}"] = aggregate_metrics(by_scene[sid])["overall"]
-    return rows

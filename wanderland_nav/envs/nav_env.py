@@ -52,9 +52,9 @@ from wanderland_nav.envs.camera import AgentCamera, Renderer
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
-from wanderland_nav.envs.metrics import EpisodeMetrics, social_metrics, spl
-from wanderland_nav.envs.rewards import (INTERVENTION_CAUSES, ProgressState, navigation_reward,
-                                         terminations, update_progress)
+from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.envs.pedestrians.component import make_pedestrians
+from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES, EpisodeMetrics, spl
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 
 log = logging.getLogger(__name__)
@@ -167,14 +167,11 @@ class NavEnv(EnvBase):
         navmesh_path = getattr(scene, "navmesh_path", None)
         self.step_field = self.field.raster(cache_dir=Path(navmesh_path).parent if navmesh_path else None)
         self.camera = AgentCamera(cfg.camera, scene.nav_from_scene, renderer, gaussians, self.device)
-        self.crowd = self.social = None  # pedestrians (envs/crowd.py): built only when asked for
-        if cfg.pedestrians.count:
-            from wanderland_nav.envs.crowd import Crowd, SocialCounters
-
-            starts = self.nav_to_scene(self.table.start_position).cpu().numpy()
-            self.crowd = Crowd(cfg.pedestrians, navmesh, scene.nav_from_scene, starts, batch_size[0],
-                               cfg.kinematics.control_period)
-            self.social = SocialCounters(batch_size[0], self.device)
+        # pedestrians (envs/pedestrians/): a component with reset and step hooks, inert when count is 0
+        self.pedestrians = make_pedestrians(cfg.pedestrians, navmesh, scene.nav_from_scene,
+                                            self.nav_to_scene(self.table.start_position).cpu().numpy(), batch_size[0],
+                                            cfg.kinematics.control_period, self.device)
+        self.crowd = self.pedestrians.crowd  # the people themselves (None without): the expert yields to them
         self._init_goal_images(where, goal_images)
         # Image keys exist only when there are images: with the camera off, blank [B, T, H, W, 3] frames
         # were ~85 % of a B=256 step (TorchRL's reset `where` and copies over them); blank goal views and
@@ -273,9 +270,8 @@ class NavEnv(EnvBase):
             rewards.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
                                   i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
                             for key in keys.EPISODE_KEYS})
-            if self.crowd is not None:
-                rewards.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
-                                for key in keys.EPISODE_SOCIAL_KEYS})
+            rewards.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
+                            for key in self.pedestrians.episode_keys})
         self.reward_spec = Composite(rewards, shape=B, device=dev)
         self.done_spec = Composite(
             {keys.DONE: flag(), keys.TERMINATED: flag(), keys.TRUNCATED: flag()}, shape=B, device=dev
@@ -309,8 +305,7 @@ class NavEnv(EnvBase):
         """Seeds the episode sampler and restarts the episode cursor: same seed, same episodes."""
         self._rng = torch.Generator().manual_seed(0 if seed is None else int(seed))
         self._cursor = 0
-        if self.crowd is not None:
-            self.crowd.seed(0 if seed is None else int(seed))
+        self.pedestrians.seed(0 if seed is None else int(seed))
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B = self.batch_size[0]
@@ -349,12 +344,9 @@ class NavEnv(EnvBase):
         success, intervention, truncated, cause = terminations(
             d_now, self.table.goal_radius[self._ep], progress, navigable, steps, cfg.termination
         )
-        if self.crowd is not None:
-            intervention, truncated, cause, penalty = self._pedestrians_step(end, plan_yaw, success, intervention,
-                                                                            truncated, cause)
-        reward = navigation_reward(self._dist, d_now, success, intervention, cfg.reward)
-        if self.crowd is not None:
-            reward = reward - penalty
+        intervention, truncated, cause, penalty = self.pedestrians.step(  # people move; a touch may end the episode
+            end, self._pos, wrap_angle(plan_yaw - self._yaw), success, intervention, truncated, cause)
+        reward = navigation_reward(self._dist, d_now, success, intervention, cfg.reward) - penalty
         self._pos, self._yaw, self._steps, self._dist, self._progress = end, plan_yaw, steps, d_now, progress
         self._path_len = self._path_len + moved_xy
         self._collisions = self._collisions + collided.long()
@@ -389,28 +381,9 @@ class NavEnv(EnvBase):
         tm["frames"] += self.batch_size[0]
         return out
 
-    def _pedestrians_step(self, end, yaw, success, intervention, truncated, cause):
-        """Move the crowd one control period around the robots' new positions; count the social metrics. A touch
-        (centres closer than the two radii) is an intervention with cause "pedestrian" where no other rule
-        ended the episode (`PedestrianConfig.collision_intervention`). -> (intervention, truncated, cause,
-        personal-space penalty `[B]`)."""
-        pc = self.config.pedestrians
-        robot_vel = (end[:, :2] - self._pos[:, :2]) / self.config.kinematics.control_period
-        dist = self.crowd.step(end, robot_vel).to(self.device)  # [B] nearest approach during the step
-        contact = dist < pc.radius + pc.robot_radius
-        self.social.update(dist, contact, wrap_angle(yaw - self._yaw))
-        if pc.collision_intervention:
-            cause = torch.where(contact & (cause == 0) & ~success, INTERVENTION_CAUSES.index("pedestrian") + 1, cause)
-            intervention = cause > 0
-            truncated = truncated & ~intervention
-        return intervention, truncated, cause, pc.personal_space_penalty * (dist < pc.personal_space).float()
-
     def _people(self, idx: torch.Tensor | None = None):
-        """The pedestrians' Gaussians for the cameras of instances idx (all when None); None without a crowd."""
-        if self.crowd is None:
-            return None
-        g = self.crowd.gaussians(self.device)
-        return g if idx is None else g.rows_at(idx)
+        """The pedestrians' Gaussians for the cameras of instances idx (all when None); None without people."""
+        return self.pedestrians.gaussians(idx, self.device)
 
     def _count_nonfinite(self, nonfinite: torch.Tensor) -> None:
         """Count NaN/inf actions per agent (reported as `EpisodeMetrics.nonfinite_actions`); warn once."""
@@ -439,9 +412,7 @@ class NavEnv(EnvBase):
         serial = self._cursor + torch.arange(n, device=self.device)
         self._cursor += n
         pos, yaw = self.table.start_position[ep], self.table.start_yaw[ep]
-        if self.crowd is not None:  # new people for these instances, clear of the new starts
-            self.crowd.reset(idx, pos)
-            self.social.reset(idx)
+        self.pedestrians.reset(idx, pos)  # new people for these instances, clear of the new starts
         render = self.carries_frames and self.config.camera.enabled  # switched off later: the history stays
         if render:
             t0 = time.perf_counter()
@@ -489,7 +460,7 @@ class NavEnv(EnvBase):
                 "collisions": self._collisions[idx],
                 "steps": self._steps[idx],
                 "undefined_distance_steps": self._undefined_steps[idx],
-                **({} if self.social is None else {k: v[idx] for k, v in self.social.values.items()}),
+                **self.pedestrians.finished_columns(idx),
             }
         )
 
@@ -527,9 +498,7 @@ class NavEnv(EnvBase):
                     distance_to_goal=float(cols["distance_to_goal"][j]),
                     nonfinite_actions=int(cols["nonfinite_actions"][j]),
                 )
-                if self.social is not None:
-                    social_metrics(m, {k: cols[k][j] for k in self.social.FIELDS}, self.config.pedestrians.count,
-                                   self.config.kinematics.control_period)
+                self.pedestrians.fill_metrics(m, cols, j)
                 out.append(m)
         self._finished = []
         return out
@@ -601,16 +570,7 @@ class NavEnv(EnvBase):
                 keys.EPISODE_PATH_LENGTH: col(self._path_len), keys.EPISODE_SHORTEST_LENGTH: col(shortest),
                 keys.EPISODE_STEPS: col(self._steps), keys.EPISODE_COLLISIONS: col(self._collisions),
                 keys.EPISODE_INTERVENTION: col(self._outcome[keys.EPISODE_INTERVENTION]),
-                **({} if self.social is None else self._social_episode_metrics(shortest))}
-
-    def _social_episode_metrics(self, shortest: torch.Tensor) -> dict:
-        """`(EPISODE, social name)` -> `[B, 1]`, as `metrics.social_metrics` defines them."""
-        v, T = self.social.values, self.config.kinematics.control_period
-        irregularity = v["turning"] / torch.maximum(self._path_len, shortest).clamp_min(1e-6)
-        col = lambda x: x.unsqueeze(-1)  # noqa: E731
-        return {keys.EPISODE_PERSON_COLLISIONS: col(v["contacts"]), keys.EPISODE_NEAR_05_SECONDS: col(v["near_05"] * T),
-                keys.EPISODE_NEAR_10_SECONDS: col(v["near_10"] * T), keys.EPISODE_MIN_PERSON_DISTANCE: col(v["min_distance"]),
-                keys.EPISODE_PATH_IRREGULARITY: col(irregularity.float())}
+                **self.pedestrians.episode_metrics(self._path_len, shortest)}
 
     # ------------------------------------------------------------------ device and display
 
@@ -630,8 +590,7 @@ class NavEnv(EnvBase):
                 if moved is not value:
                     self.__dict__[name] = moved
         self.camera.to(device)
-        if self.social is not None:
-            self.social.to(device)
+        self.pedestrians.to(device)
         if self.expert is not None:
             self.expert.to(device)
         return self

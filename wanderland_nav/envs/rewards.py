@@ -76,15 +76,10 @@ def terminations(
     return success, intervention, truncated, cause
 
 
-#: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
-#: fire on the same step the first listed wins: leaving the navmesh is the most specific, then stuck (blocked and
-#: motionless for `stuck_steps`), then no progress (the catch-all: `no_progress_steps` without a new best distance).
-#: Code 4, "pedestrian", is set by the env when the robot touches a person (`envs.crowd`), where no other rule fired.
-INTERVENTION_CAUSES = ("off_navmesh", "stuck", "no_progress", "pedestrian")
 
 
 def intervention_cause(state: ProgressState, navigable: torch.Tensor, cfg: TerminationConfig) -> torch.Tensor:
-    """`[B]` long: 1 + index into `INTERVENTION_CAUSES` of the rule that fires, 0 where none does.
+    """`[B]` long: 1 + index into `evaluation.metrics.INTERVENTION_CAUSES` of the rule that fires, 0 where none does.
 
     The intervention rule of `terminations` (which also requires no success); kept apart so an episode
     record can say which rule ended it (IR by cause).

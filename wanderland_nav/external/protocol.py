@@ -5,7 +5,7 @@ defaults and the checks):
 
 * `observes`: the observation keys it reads (`wanderland_nav.keys`: `rgb`, `depth`, `past_positions`,
   `goal_vector`, `goal_pose`, `goal_image`, `has_goal_image`, `instruction_tokens`); a task that hides one of
-  them refuses the policy (`wanderland_nav.tasks`);
+  them refuses the policy (`wanderland_nav.benchmark.tasks`);
 * `num_waypoints` (K), `context` (camera frames it needs, newest last) and `image_size` (`(H, W)` of the camera,
   or None for the env's): the env is shaped to these, as for the package's own policies;
 * `act(obs) -> waypoints`: `obs` maps each key of `observes` to a numpy array with a leading batch dim `[B, ...]`

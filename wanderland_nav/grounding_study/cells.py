@@ -20,7 +20,9 @@ import yaml
 
 from planners import NavMesh
 from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.cache import Ledger
 from wanderland_nav.compose.build import load_navmesh, make_policy_from_config
+from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.cli import compose_config, resolved
 from wanderland_nav.compose.comparison import compare_checkpoints
 from wanderland_nav.compose.episode_file import episodes_for_run, split_counts
@@ -31,7 +33,7 @@ from wanderland_nav.compose.study_config import BC_ROUND, PROTOCOLS, StudyConfig
 from wanderland_nav.degrade import build_degraded_scene, preset
 from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_episodes
 from wanderland_nav.episodes.sampler import SamplerSettings
-from wanderland_nav.grounding_study.plan import GROUNDED, Cell, Manifest, cell_digests
+from wanderland_nav.grounding_study.plan import GROUNDED, Cell, cell_digests
 from wanderland_nav.grounding_study.routes import grounded_routes_file
 from wanderland_nav.rl.checkpoint import save_checkpoint
 
@@ -145,7 +147,7 @@ class StudyCells:
                                 splits=tuple(t.episodes.splits), goal_images=t.episodes.goal_images)
         return scene, path, t
 
-    def check_trained_recipes(self, manifest: Manifest) -> None:
+    def check_trained_recipes(self, manifest: Ledger) -> None:
         """Refuse to reuse a done `train` cell whose recorded config (`config.yaml`, resolved) differs from
         what `study.train` composes now. A cell's hash covers the `study.train` overrides, not the config
         defaults and code they resolve against: after e.g. a PPO fix changes `conf/algo`, the same overrides
@@ -188,7 +190,7 @@ class StudyCells:
         torch.manual_seed(cell.seed)
         policy = make_policy_from_config(conf["policy"], self.c.device)
         save_checkpoint(folder / CHECKPOINTS["untrained"], policy=policy, optimizer=None, counters={}, config=conf,
-                        phase="untrained")
+                        card=policy_card(conf, policy), phase="untrained")
         return {"checkpoint": str(folder / CHECKPOINTS["untrained"])}
 
     def _train(self, cell: Cell, folder: Path) -> dict:
@@ -262,7 +264,7 @@ def _episodes_to_run(episodes: Path, split: str, wanted: int | None) -> int:
     return have if wanted is None else min(have, wanted)
 
 
-def eval_records(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> dict[str, dict[tuple, list[dict]]]:
+def eval_records(manifest: Ledger, cells: list[Cell], digests: dict[str, str]) -> dict[str, dict[tuple, list[dict]]]:
     """protocol -> (eval env, seed, trained-in env, phase) -> per-episode records of every eval cell done
     with its hash. The grounded env has one episode set, so its records also stand in the
     "grounded_routes" protocol."""

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from wanderland_nav.atomic import atomic_write_json
+from wanderland_nav.cache import Ledger, process_alive
 from wanderland_nav.compose.study_config import POLICY_PHASES, PROTOCOLS, StudyConfig, StudyGroup, is_policy_phase
 from wanderland_nav.degrade import preset
 from wanderland_nav.episodes.sampler import SamplerSettings
@@ -165,89 +165,13 @@ def cell_digests(c: StudyConfig, cells: list[Cell]) -> dict[str, str]:
     return out
 
 
-class Manifest:
-    """`<out>/done.json`: key -> {hash, status (done | failed | blocked | running), dir, seconds, info | error,
-    earlier}. Rewritten atomically after every cell, so a killed study loses at most the cell it was running.
-
-    A key is one cell of the plan; its hash says which inputs made it. When a key runs again with another
-    hash (two study configs on one `out`, e.g. `grounding` and `grounding_recipe`, whose BC+RL evaluations
-    share keys), the earlier DONE entry moves under `earlier[<its hash>]` and still counts for that hash, so
-    alternating the configs re-runs nothing; its folder (named by hash) is never touched.
-
-    Several study processes may share one `out` (e.g. one per seed on a multi-core box): `record` merges
-    into the file as it is now under an exclusive lock, and `status` re-reads it, so one process sees the
-    cells another finished; a cell another live process is running (`running` with its pid) is skipped.
-    Two processes can therefore work through the same plan, e.g. one in reverse preset order."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-        self.entries: dict[str, dict] = self._read()
-
-    def _read(self) -> dict[str, dict]:
-        if not self.path.is_file():
-            return {}
-        try:
-            return json.loads(self.path.read_text())
-        except (OSError, ValueError) as e:  # truncated or emptied: its cells are redone, never a crash that sticks
-            log.warning("%s: unreadable done-manifest (%s); its cells are redone and the manifest replaced",
-                        self.path, e)
-            return {}
-
-    def entry(self, key: str, digest: str) -> dict | None:
-        """The entry `key` has for `digest` (current or earlier), as of the last `status` / `record`."""
-        e = self.entries.get(key)
-        if e is None or e.get("hash") == digest:
-            return e
-        return e.get("earlier", {}).get(digest)
-
-    def status(self, key: str, digest: str) -> str | None:
-        self.entries = self._read() or self.entries
-        e = self.entry(key, digest)
-        return None if e is None else e["status"]
-
-    def record(self, key: str, entry: dict, *, unless_taken: bool = False) -> bool:
-        """Write `entry` for `key`; with `unless_taken`, only when no other live process has claimed or
-        finished the cell with the same hash meanwhile (check and write under one lock). -> written."""
-        import fcntl
-
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with open(self.path.with_suffix(".lock"), "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            now = self._read()
-            old = now.get(key, {})
-            if unless_taken and old.get("hash") == entry.get("hash") and (
-                    old.get("status") == "done" or (old.get("status") == "running" and process_alive(old.get("pid")))):
-                self.entries = now
-                return False
-            earlier = dict(old.get("earlier", {}))
-            if old.get("status") == "done" and old.get("hash") != entry.get("hash"):
-                earlier[old["hash"]] = {k: v for k, v in old.items() if k != "earlier"}
-            earlier.pop(entry.get("hash"), None)  # the entry itself is now the current one for its hash
-            self.entries = {**now, key: {**entry, **({"earlier": earlier} if earlier else {})}}
-            atomic_write_json(self.path, self.entries)
-            return True
-
-
-def process_alive(pid) -> bool:
-    """Whether process `pid` (another study process working on a cell) still runs on this machine."""
-    if not pid or pid == os.getpid():
-        return False
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path], dict], out: Path) -> Manifest:
+def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path], dict], out: Path) -> Ledger:
     """Run every cell not done yet (with this hash) whose needs are done; `execute(cell, folder) -> info`.
 
     A cell that raises is recorded as failed with its error and the study goes on (its dependants are
     recorded as blocked); a failed cell is not retried on restart unless `study.retry_failed`."""
     digests = cell_digests(c, cells)
-    manifest = Manifest(out / MANIFEST)
+    manifest = Ledger(out / MANIFEST)
     for cell in cells:
         h = digests[cell.key]
         status = manifest.status(cell.key, h)

@@ -9,18 +9,19 @@ import logging
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_text
+from wanderland_nav.cache import Ledger, process_alive
 from wanderland_nav.compose.study_config import StudyConfig
 from wanderland_nav.degrade.crosseval import fig8, table3
 from wanderland_nav.degrade.crosseval_routes import fig8_same_routes
 from wanderland_nav.grounding_study.cells import eval_records
-from wanderland_nav.grounding_study.plan import GROUNDED, Cell, Manifest, process_alive, cell_digests
+from wanderland_nav.grounding_study.plan import GROUNDED, Cell, cell_digests
 from wanderland_nav.viz.rerun_side_by_side import write_side_by_side
 from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.study")
 
 
-def cell_status_lines(manifest: Manifest, cells: list[Cell], digests: dict[str, str]) -> list[str]:
+def cell_status_lines(manifest: Ledger, cells: list[Cell], digests: dict[str, str]) -> list[str]:
     """Counts per status, then one line per cell that is not done (with its error), and the episodes
     each environment's navmesh yielded (a broken navmesh shows up here)."""
     status = {c.key: manifest.status(c.key, digests[c.key]) or "not run" for c in cells}
@@ -50,7 +51,7 @@ def _training_line(c: Cell, e: dict) -> str:
             + ("" if ppo is None else f", {frames}{ppo} PPO policy updates"))
 
 
-def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: Manifest, meshes: dict[str, Path],
+def write_study_outputs(c: StudyConfig, out: Path, cells: list[Cell], manifest: Ledger, meshes: dict[str, Path],
                         header: str) -> dict[str, Path]:
     """Write table.txt, fig8.png (when any Fig.-8 estimate exists) and meshes.rrd; -> what was written."""
     s = c.study

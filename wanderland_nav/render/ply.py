@@ -1,4 +1,4 @@
-"""3DGS PLY tables: thin wrappers over `plyfile` (`wanderland_nav.plyio`) that raise `PlyError`.
+"""3DGS PLY tables: thin wrappers over `plyfile` (`wanderland_nav.render.plyio`) that raise `PlyError`.
 
 Properties are always addressed by name, never by position, because exporters reorder them (INRIA
 writes `f_dc, f_rest, opacity, scale, rot`; PlayCanvas writes `scale` first). Binary files of either
@@ -13,7 +13,7 @@ import os
 import numpy as np
 
 from wanderland_nav.errors import WanderlandInputError
-from wanderland_nav.plyio import element_table, read_ply_data, write_ply_table
+from wanderland_nav.render.plyio import element_table, read_ply_data, write_ply_table
 
 
 class PlyError(WanderlandInputError):

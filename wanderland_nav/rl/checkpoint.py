@@ -4,7 +4,8 @@ One file per save (`ckpt_<iteration>.pt`) plus `last.pt`, each written to a temp
 into place (`wanderland_nav.atomic`), so killing the run at any moment leaves the previous checkpoint
 intact. A checkpoint holds the policy's state dict (which includes its normalisation buffers), the
 optimiser, step counters, RNG states and the resolved config, so `load + restore` resumes where the run
-stopped.
+stopped, and the policy card (`card`: the policy's config and what it needs from the env, `compose.checkpoints`),
+so any consumer rebuilds the policy without the training config.
 
 Loading never runs code from the file: every load is `torch.load(weights_only=True)`, so the payload is
 plain data only (tensors, numbers, strings, lists, dicts; the numpy RNG state is stored as a tensor), and
@@ -72,7 +73,7 @@ def _plain_data(value: Any, where: str = "checkpoint") -> Any:
 
 def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: torch.optim.Optimizer | None,
                     counters: dict[str, int], config: dict | None = None, phase: str = "",
-                    extra: dict | None = None) -> Path:
+                    extra: dict | None = None, card: dict | None = None) -> Path:
     """Write a checkpoint atomically to `path` and return it."""
     path = Path(path)
     payload = {
@@ -82,6 +83,7 @@ def save_checkpoint(path: str | Path, *, policy: torch.nn.Module, optimizer: tor
         "optimizer": optimizer.state_dict() if optimizer is not None else None,
         "counters": dict(counters),
         "config": config,
+        "card": card,
         "rng": rng_state(),
         "extra": extra or {},
     }

@@ -43,6 +43,7 @@ from policies.base import NavPolicy, WaypointNormal
 from wanderland_nav import keys as K
 from wanderland_nav.envs.config import KinematicsConfig
 from wanderland_nav.errors import NonFiniteLossError
+from wanderland_nav.evaluation.metrics import aggregate_metrics
 from wanderland_nav.rl.checkpoint import Checkpointer, set_rng_state
 from wanderland_nav.rl.critic import NavCritic, explained_variance, fit_critic
 from wanderland_nav.rl.loggers import Logger
@@ -167,8 +168,6 @@ def env_episode_metrics(collector) -> dict[str, float]:
     finished = env.pop_finished_metrics()
     if not finished:
         return {}
-    from wanderland_nav.envs.metrics import aggregate_metrics
-
     o = aggregate_metrics(finished)["overall"]
     return {"train/episodes": o["episodes"],
             **{f"train/{k}": o[k] for k in ("NE", "distance_to_goal", "SR", "SPL", "IR", "nonfinite_actions")}}
@@ -197,7 +196,7 @@ class PPOTrainer:
     def __init__(self, policy: NavPolicy, env_fn: Callable[[], EnvBase] | EnvBase, cfg: PPOConfig, *,
                  logger: Logger, checkpointer: Checkpointer | None = None, num_workers: int = 1,
                  seed: int = 0, config_dict: dict | None = None, progress: bool = True, ray: dict | None = None,
-                 kinematics: KinematicsConfig | None = None):
+                 kinematics: KinematicsConfig | None = None, card: dict | None = None):
         """`kinematics`: the env's (`env.kinematics`), required by `action_dist=tracked`: the tracked waypoint
         must be chosen by the env's own rule and thresholds."""
         if cfg.action_dist == "tracked" and kinematics is None:
@@ -207,6 +206,7 @@ class PPOTrainer:
         self.ray = ray  # collector=ray options (address, cpus_per_worker, ...); None: local collectors
         self.logger, self.checkpointer = logger, checkpointer
         self.num_workers, self.seed, self.config_dict, self.progress = num_workers, seed, config_dict, progress
+        self.card = card  # the policy card saved beside the weights (compose.checkpoints)
         if policy.config.freeze_encoder != "never":  # "rl" (the paper: update only the policy) or "always"
             policy.freeze_encoders(True)
         self.actor = make_actor(policy, kinematics if cfg.action_dist == "tracked" else None, cfg.init_std)
@@ -246,8 +246,8 @@ class PPOTrainer:
                       "action_std_param": self.std_owner.std_param.detach().clone(),
                       "learner_rng": self.generator.get_state()}
             self.checkpointer.save(self.iteration, policy=self.policy, optimizer=self.optim,
-                                   counters=self.state_counters(), config=self.config_dict, phase=phase,
-                                   extra=critic)
+                                   counters=self.state_counters(), config=self.config_dict, card=self.card,
+                                   phase=phase, extra=critic)
 
     def restore(self, ckpt: dict) -> None:
         self.policy.load_state_dict(ckpt["policy"])

@@ -20,7 +20,7 @@ from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.blank_camera import BlankCamera
 from wanderland_nav.rl.checkpoint import Checkpointer, save_checkpoint
 from wanderland_nav.rl.ppo import PPOConfig, PPOTrainer
-from wanderland_nav.report import BLANK_CAMERA, SAMPLED
+from wanderland_nav.evaluation.tables import BLANK_CAMERA, SAMPLED
 from wanderland_nav.rl.scene_sets import behaviour_cloning
 
 log = logging.getLogger("wanderland_nav.train")
@@ -31,12 +31,11 @@ class Recipe:
     """What one training run does (all loaded, nothing read from a config here)."""
 
     policy: Any
-    eval_env: Any
+    evaluator: Any  # `evaluation.Evaluator`: evaluate(policy, name, step, deterministic=None) -> EvaluationResult
     env_fn: Callable[[], Any]  # picklable, for collector workers
     nav_from_scene: Any  # [3, 3] for the expert paths
     bc: BCConfig | None  # None: no BC phase
     ppo: PPOConfig | None  # None: no PPO phase
-    evaluate: Callable  # (name, policy, env, step, deterministic=None) -> EvaluationResult (None: eval.deterministic)
     logger: Any
     run_dir: Path
     config: dict  # stored in checkpoints
@@ -50,6 +49,7 @@ class Recipe:
     kinematics: Any = None  # the env's KinematicsConfig: PPO's tracked-target action (rl/tracked_target.py)
     sampled_rows: bool = False  # every trained row is evaluated a second time with sampled actions, "<row> sampled"
     blank_camera_rows: bool = False  # and with its camera blanked, "<row> blank camera" (rl/blank_camera.py)
+    card: dict | None = None  # the policy card stored beside the weights (compose.checkpoints.policy_card)
 
 
 def eval_prefix(row: str) -> str:
@@ -106,7 +106,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     results = _load_results(results_path, state, r.identity["hash"])
     phase = state.get("phase") if state else None
     r.logger.truncate(logged_before(state, results))
-    save_kw = dict(config={**r.config, "identity": r.identity})
+    save_kw = dict(config={**r.config, "identity": r.identity}, card=r.card)
     times: dict[str, float] = {}
 
     def evaluate(name: str, step: int) -> None:
@@ -122,7 +122,9 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
         r.policy.eval()
         t = time.perf_counter()
         with _timed(times, f"eval {name}"):
-            res = r.evaluate(name, policy or r.policy, r.eval_env, step, deterministic=deterministic)
+            res = r.evaluator.evaluate(policy or r.policy, name, step, deterministic=deterministic)
+        if r.evaluator.per_scene:
+            log.info("eval %s per scene:\n%s", name, res.table)
         o = res.summary["overall"]
         # logged before the result is stored: a kill in between redoes the evaluation and drops this row
         r.logger.log_scalars({f"{eval_prefix(name)}/{k}": o[k] for k in ("NE", "SR", "SPL", "IR")}, step)
@@ -165,7 +167,7 @@ def run_recipe(r: Recipe) -> tuple[dict, list[str]]:
     if r.ppo is not None:
         trainer = PPOTrainer(r.policy, train_env if train_env is not None else r.env_fn, r.ppo, logger=r.logger, checkpointer=ckpt, num_workers=r.num_workers,
                              ray=r.ray, seed=r.seed, config_dict=save_kw["config"], progress=r.progress,
-                             kinematics=r.kinematics)
+                             kinematics=r.kinematics, card=r.card)
         if phase in ("ppo", "ppo_done"):
             trainer.restore(state)
             log.info("PPO resumes at iteration %d (%d frames)", trainer.iteration, trainer.frames)

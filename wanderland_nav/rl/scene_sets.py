@@ -1,27 +1,23 @@
-"""A prepared scene set as training and evaluation envs: trained on together, evaluated per scene.
+"""A prepared scene set as training envs: every scene trained on together.
 
-Both sides take `scene_env(scene_id, sub_batch, seed) -> NavEnv`, a picklable per-scene env factory
+Training takes `scene_env(scene_id, sub_batch, seed) -> NavEnv`, a picklable per-scene env factory
 that the composition root builds over the set's prepared folders (`compose/scene_sets.py`), so this
 module never reads a scene from disk. Training steps a `MultiSceneNavEnv` over all scenes (built by
 the collectors from `multi_scene_env_fn`); behaviour cloning runs on one too, with global episode
-indices labelled by every scene's expert paths (`behaviour_cloning`, per-scene sample counts logged);
-`SceneSetEvaluation` evaluates every scene's split once and reports rows overall, indoor/outdoor and
-`scene/<id>`.
+indices labelled by every scene's expert paths (`behaviour_cloning`, per-scene sample counts logged).
+A set is evaluated per scene by `evaluation.Evaluator` (`per_scene=True`) over the same per-scene factory.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Sequence
 
 import numpy as np
 from torchrl.envs import EnvBase
 
-from wanderland_nav.envs.evaluation import EvaluationResult, run_evaluation
-from wanderland_nav.envs.metrics import EpisodeMetrics, format_table
-from wanderland_nav.envs.multi_scene import MultiSceneNavEnv, aggregate_by_scene
+from wanderland_nav.envs.multi_scene import MultiSceneNavEnv
 from wanderland_nav.rl.bc import BCConfig, ExpertPaths, train_bc
 
 log = logging.getLogger(__name__)
@@ -68,31 +64,3 @@ def behaviour_cloning(policy, env, nav_from_scene, cfg: BCConfig, *, logger=None
         if logger is not None:
             logger.log_scalars(per_scene, cfg.rounds * cfg.updates_per_round)
     return stats
-
-
-@dataclass
-class SceneSetEvaluation:
-    """Evaluation over a set: each scene's split, every episode once (or `num_episodes` per scene)."""
-
-    scene_ids: list[str]
-    scene_env: SceneEnvFn
-    batch_size: int
-
-    def run(self, policy, num_episodes: int | None = None, *, seed: int = 0, name: str = "policy",
-            progress: bool = False) -> EvaluationResult:
-        """`policy`: a TensorDict -> TensorDict callable, or a `NavEnv -> policy` factory flagged with
-        `policy.per_env = True` (references such as the expert read their env)."""
-        by_scene: dict[str, list[EpisodeMetrics]] = {}
-        records = []
-        for sid in self.scene_ids:
-            env = self.scene_env(sid, self.batch_size, seed)
-            actor = policy(env) if getattr(policy, "per_env", False) else policy
-            res = run_evaluation(env, actor, num_episodes, seed=seed, name=f"{name}/{sid}", progress=progress)
-            env.close()
-            by_scene[sid] = [EpisodeMetrics(**r) for r in res.records]
-            records += [{**r, "scene_id": sid} for r in res.records]
-        summary = aggregate_by_scene(by_scene)
-        return EvaluationResult(records, summary, format_table({f"{name}/{g}": r for g, r in summary.items()}))
-
-    def close(self) -> None:
-        """Nothing to release: each scene's env is built for one run and closed after it."""

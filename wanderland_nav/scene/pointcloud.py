@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
-from wanderland_nav.plyio import read_ply_data, write_ply_table
+from wanderland_nav.render.plyio import read_ply_data, write_ply_table
 from wanderland_nav.errors import WanderlandInputError
 
 
@@ -27,7 +27,7 @@ def read_ply(path) -> tuple[plyfile.PlyData, dict[str, dict[str, np.ndarray]]]:
     """Read every element into `{element: {property: array[count]}}` (native byte order; a list
     property is `[count, L]` when every list has the same length, else an object array).
 
-    Parsing is `plyfile`'s (`wanderland_nav.plyio`); errors are `PointCloudFormatError` naming the file,
+    Parsing is `plyfile`'s (`wanderland_nav.render.plyio`); errors are `PointCloudFormatError` naming the file,
     element, row and property."""
     data = read_ply_data(path, PointCloudFormatError)
     out = {}

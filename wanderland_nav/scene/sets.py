@@ -10,7 +10,7 @@ A manifest is one of
     training_ready), optional `manifest_version`, `data_path` (relative to the data root) and `split`.
 
 Sets filter by quality tier and split (`SceneSet.filter`). Scene folders are not read here: a set
-may name scenes that are still to be built (the demo set) or prepared (`wanderland_nav.prepare_set`);
+may name scenes that are still to be built (the demo set) or prepared (`wanderland_nav.preparation.scene_set`);
 `SceneSet.missing()` lists them. Bad rows fail with the file and line named.
 """
 

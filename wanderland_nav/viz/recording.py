@@ -16,7 +16,7 @@ from pathlib import Path
 import rerun as rr
 
 from wanderland_nav.atomic import atomic_path
-from wanderland_nav.rollouts import Rollout
+from wanderland_nav.evaluation.rollouts import Rollout
 from wanderland_nav.viz.blueprint import default_blueprint
 from wanderland_nav.viz.rerun_episodes import log_episodes
 from wanderland_nav.viz.rerun_rollout import FrameSource, log_rollout

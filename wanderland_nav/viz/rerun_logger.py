@@ -22,8 +22,8 @@ from typing import Any, Callable
 import numpy as np
 import rerun as rr
 
-from wanderland_nav.envs.recording import rollout_from_tensordict
-from wanderland_nav.rollouts import Rollout
+from wanderland_nav.evaluation.recording import rollout_from_tensordict
+from wanderland_nav.evaluation.rollouts import Rollout
 from wanderland_nav.viz.blueprint import default_blueprint
 from wanderland_nav.viz.rerun_rollout import log_rollout
 from wanderland_nav.viz.rerun_scene import log_scene

@@ -30,7 +30,7 @@ import rerun as rr
 import torch
 
 from wanderland_nav.geometry import agent_camera_poses, yaw_rotation
-from wanderland_nav.rollouts import Rollout
+from wanderland_nav.evaluation.rollouts import Rollout
 from wanderland_nav.viz.rerun_episodes import entity_name
 from wanderland_nav.viz.rerun_scene import view_coordinates
 

@@ -10,7 +10,7 @@ import torch
 from policies import make_policy
 from wanderland_nav import keys
 from wanderland_nav.envs import NavEnvConfig
-from wanderland_nav.tasks import TASK_NAMES, check_reads, check_task_episodes, hidden_reads, make_task, task_env_config
+from wanderland_nav.benchmark.tasks import TASK_NAMES, check_reads, check_task_episodes, hidden_reads, make_task, task_env_config
 
 
 def test_each_task_shows_the_shared_keys_and_only_its_own_goal():

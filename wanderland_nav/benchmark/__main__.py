@@ -4,7 +4,7 @@
         'policies=[{name: expert, reference: expert}, {name: mine, target: my_pkg.my_module:MyPolicy},
                    {name: served, url: "http://127.0.0.1:8765"}, {name: cw, checkpoint: outputs/.../last.pt}]'
 
-Every policy runs every task whose observations cover what it reads (`wanderland_nav.tasks`); the others are
+Every policy runs every task whose observations cover what it reads (`benchmark.tasks`); the others are
 listed as not run, with the keys that kept them out. Prints one NE / SR / SPL / IR table with 95 % intervals
 (rows `task/policy`, `task/policy/indoor|outdoor`, and paired differences against `baseline`) and writes
 `table.txt`, `results.csv`, `timing.json` and one `runs/<task>/<policy>.json` per evaluation to `out`; a rerun
@@ -13,15 +13,15 @@ reuses the evaluations whose inputs are unchanged. The protocol: docs/guide/benc
 
 from __future__ import annotations
 
-import sys
+from wanderland_nav.app import entry_point  # first: it readies the process (see app.py)
+
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from wanderland_nav.compose import scene_overrides, typed_config
-from wanderland_nav.compose.benchmarking import run_benchmark
-from wanderland_nav.compose.cli import CONF_DIR, hydra_output_dir
+from wanderland_nav.benchmark.runner import run_benchmark
+from wanderland_nav.compose import typed_config
+from wanderland_nav.compose.cli import hydra_output_dir
 from wanderland_nav.compose.schema import BenchmarkConfig
 
 
@@ -35,16 +35,7 @@ def run(cfg: DictConfig) -> dict:
     return res
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="benchmark")
-def hydra_main(cfg: DictConfig) -> None:
-    if run(cfg)["unfinished"]:  # an evaluation whose policy server could not be reached: exit status 1
-        sys.exit(1)
-
-
-def main() -> None:
-    """`wanderland-benchmark` and `python -m wanderland_nav.benchmark`: the command line, then Hydra."""
-    sys.argv = [sys.argv[0]] + scene_overrides(sys.argv[1:])
-    hydra_main()
+main = entry_point("benchmark", run)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
-"""Recording a running `NavEnv` into a `Rollout` (the file format of `wanderland_nav.rollouts`).
+"""Recording a running `NavEnv` into a `Rollout` (the file format of `wanderland_nav.evaluation.rollouts`).
 
-The recorder lives beside the env because it reads the env's TensorDicts and camera; the file
-format itself stays a plain numpy module that replay and viz read without the env.
+The recorder sits in the evaluation package, above the env, because it reads the env's TensorDicts and camera;
+the file format itself (`rollouts.py`) stays a plain numpy module that replay and viz read without the env.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import numpy as np
 import torch
 
 from wanderland_nav import keys
-from wanderland_nav.envs.evaluation import run_evaluation
+from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.experts import waypoints_along_samples
-from wanderland_nav.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
+from wanderland_nav.evaluation.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
 
 
 class RolloutRecorder:
@@ -112,7 +112,7 @@ def step_arrays(td, td_next, frames: bool) -> dict[str, np.ndarray]:
 
 class RecordingEnv:
     """A transparent proxy over a `NavEnv` that feeds a `RolloutRecorder` from `step_and_maybe_reset`
-    and `pop_finished_metrics`. Lets `run_evaluation` (ENV's loop) record without changing it."""
+    and `pop_finished_metrics`. Lets `run_evaluation` (the loop over one env) record without changing it."""
 
     def __init__(self, env, recorder: RolloutRecorder):
         self._env, self.recorder = env, recorder

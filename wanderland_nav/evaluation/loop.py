@@ -17,8 +17,8 @@ from pathlib import Path
 import torch
 
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
-from wanderland_nav.envs.metrics import EpisodeMetrics, aggregate_metrics
-from wanderland_nav.report import comparison_table
+from wanderland_nav.evaluation.metrics import EpisodeMetrics, aggregate_metrics
+from wanderland_nav.evaluation.tables import comparison_table
 
 
 @dataclass

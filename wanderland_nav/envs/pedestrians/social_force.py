@@ -16,7 +16,7 @@ sum, n_ij the unit vector from j to i, t_ij its tangent, g(x) = max(x, 0), dv^t_
 difference. A robot is both a walker (the elliptical term, with its own V0) and an obstacle: the 1995
 model's border repulsion on the edge gap, U0 = 10 m^2/s^2, R = 0.2 m, without a field of view (50 m/s^2 at
 touch against the walker term's 7, which let people brush a standing robot). Walls are the navmesh's job
-(`crowd.py`). Parameters: `PedestrianConfig` (its docstring gives the
+(`pedestrians/crowd.py`). Parameters: `PedestrianConfig` (its docstring gives the
 sources).
 """
 
@@ -26,7 +26,7 @@ import math
 
 import torch
 
-from wanderland_nav.envs.pedestrian_config import PedestrianConfig
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
 
 
 def interaction_acceleration(pos: torch.Tensor, vel: torch.Tensor, radius: torch.Tensor, active: torch.Tensor,

@@ -33,7 +33,7 @@ from wanderland_nav.episodes.generate import GeneratorSettings, write_scene_epis
 from wanderland_nav.scene.generated import make_generated_scene
 from wanderland_nav.scene.collision import CollisionSettings
 from wanderland_nav.scene.sets import SceneSet
-from wanderland_nav.scene_preparation import input_digests, prepare_scene, scene_inputs
+from wanderland_nav.preparation.scene import input_digests, prepare_scene, scene_inputs
 
 log = logging.getLogger(__name__)
 MANIFEST_FORMAT = 1

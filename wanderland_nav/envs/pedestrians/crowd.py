@@ -20,9 +20,9 @@ import math
 import numpy as np
 import torch
 
-from wanderland_nav.envs.pedestrian_bodies import body_gaussians
-from wanderland_nav.envs.pedestrian_config import PedestrianConfig
-from wanderland_nav.envs.social_force import integrate
+from wanderland_nav.envs.pedestrians.bodies import body_gaussians
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
+from wanderland_nav.envs.pedestrians.social_force import integrate
 
 _CANDIDATES = 8  # spawn candidates per person; the first clear of the robot is taken
 _ROBOT_BUFFER = 0.1  # m beyond contact: a boundary slide ending this close to a robot (and closer than before) stops

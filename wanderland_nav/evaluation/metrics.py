@@ -11,7 +11,7 @@
   (`planners` docs), so measuring `p` in 3-D would bias SPL low on ramps and stairs;
 * IR: intervention rate (episodes ended because the agent got stuck, made no progress or left
   the navigable region; timeouts are counted apart); IR_stuck / IR_no_progress / IR_off_navmesh split it
-  by the rule that fired (`intervention_cause` on each record; `envs.rewards.INTERVENTION_CAUSES`), they sum to IR;
+  by the rule that fired (`intervention_cause` on each record; `INTERVENTION_CAUSES`), they sum to IR;
 * nonfinite_actions: steps in which the policy sent a NaN/inf action (the agent stood still, see
   `envs.kinematics`); any non-zero mean means the policy diverged, whatever SR says.
 
@@ -25,7 +25,12 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
 
-from wanderland_nav.envs.rewards import INTERVENTION_CAUSES
+#: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
+#: fire on the same step the first listed wins: leaving the navmesh is the most specific, then stuck (blocked and
+#: motionless for `stuck_steps`), then no progress (the catch-all: `no_progress_steps` without a new best distance).
+#: Code 4, "pedestrian", is set by the env when the robot touches a person (`envs.pedestrians.crowd`), where no other rule fired.
+#: The env's rules (`envs.rewards.intervention_cause`) emit these codes; the records and tables name them.
+INTERVENTION_CAUSES = ("off_navmesh", "stuck", "no_progress", "pedestrian")
 
 GROUPS = ("overall", "indoor", "outdoor")
 COLUMNS = ("episodes", "NE", "distance_to_goal", "SR", "SPL", "IR", "path_length", "collisions", "steps",
@@ -99,6 +104,14 @@ def aggregate_metrics(episodes: Iterable[EpisodeMetrics]) -> dict[str, dict[str,
         if sub:
             out[env] = _summarise(sub)
     return out
+
+
+def aggregate_by_scene(by_scene: dict[str, list[EpisodeMetrics]]) -> dict[str, dict[str, float]]:
+    """Rows `overall`, `indoor`, `outdoor` (over all scenes) and `scene/<id>` (one per scene)."""
+    rows = aggregate_metrics([m for ms in by_scene.values() for m in ms])
+    for sid in sorted(by_scene):
+        rows[f"scene/{sid}"] = aggregate_metrics(by_scene[sid])["overall"]
+    return rows
 
 
 def _summarise(eps: Sequence[EpisodeMetrics]) -> dict[str, float]:

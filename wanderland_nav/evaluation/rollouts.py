@@ -1,4 +1,4 @@
-"""A compact rollout file (`.npz`): a pure numpy file format (its recorder lives beside the env, `envs/recording.py`).
+"""A compact rollout file (`.npz`): a pure numpy file format (its recorder reads the env, `evaluation/recording.py`).
 
 Why a file of its own: researchers debug a policy by replaying what it did (`python -m
 wanderland_nav.replay rollout=<file>`), long after the run; the file keeps only what cannot be
