@@ -44,7 +44,7 @@ from PIL import Image
 
 from wanderland_nav import keys
 from wanderland_nav.external.protocol import NEW_EPISODE, ExternalPolicy, describe
-from wanderland_nav.external.server import MAX_BODY_BYTES, is_loopback, request_refusal
+from wanderland_nav.external.server import MAX_BODY_BYTES, drain_refused, is_loopback, request_refusal
 
 log = logging.getLogger(__name__)
 
@@ -261,7 +261,7 @@ class _Handler(BaseHTTPRequestHandler):
         form_path = self.path not in ("/navigator_reset", "/navigator_reset_env")
         refusal = request_refusal(self.headers, srv, ("multipart/form-data",) if form_path else ("application/json",))
         if refusal is not None:
-            self.close_connection = True  # the body, if any, is never read
+            drain_refused(self, refusal[0])  # a body above the limit is never read
             return self._send_json(refusal[0], {"error": refusal[1]})
         body = self.rfile.read(int(self.headers["Content-Length"]))
         try:

@@ -95,6 +95,15 @@ def request_refusal(headers, server, content_types: tuple[str, ...] | None = Non
     return None
 
 
+def drain_refused(handler, status: int) -> None:
+    """Read a refused request's body when it is within the limit (never a 413's), so the connection closes cleanly:
+    a socket closed with unread bytes sends a reset, which can reach the client before it reads the refusal."""
+    handler.close_connection = True
+    length = handler.headers.get("Content-Length") or ""
+    if status != 413 and length.strip().isdigit() and int(length) <= handler.server.max_body_bytes:
+        handler.rfile.read(int(length))
+
+
 class _Handler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"  # keep-alive: one connection per client
 
@@ -112,7 +121,7 @@ class _Handler(BaseHTTPRequestHandler):
         refusal = request_refusal(self.headers, self.server)
         if refusal is None:
             return False
-        self.close_connection = True
+        drain_refused(self, refusal[0])
         self._error(*refusal)
         return True
 
@@ -126,7 +135,7 @@ class _Handler(BaseHTTPRequestHandler):
     def do_POST(self):  # noqa: N802
         refusal = request_refusal(self.headers, self.server, (CONTENT_TYPE,))
         if refusal is not None:
-            self.close_connection = True  # the body, if any, is never read
+            drain_refused(self, refusal[0])  # a body above the limit is never read
             return self._error(*refusal)
         body = self.rfile.read(int(self.headers["Content-Length"]))
         if self.path != "/act":
