@@ -4,12 +4,16 @@ Why: a typo or a wrong type in a YAML file or on the command line must fail befo
 with the key named (`Key 'widht' not in 'CameraConfig' / full_key: env.camera.widht`), instead of
 falling back to a default. The library dataclasses (`NavEnvConfig`, `CollisionSettings`,
 `NavMeshSettings`, `BCConfig`, `PPOConfig`, `GeneratorSettings`, `FitConfig`) are used as they
-are, so there is no second, hand-written copy of their fields. `typed_config` is the one
-conversion; OmegaConf checks keys and types, `at_least` / `above` on this module's fields check ranges
-naming the full key (`train_env.batch_size=0: must be >= 1`), and the library dataclasses' own
-`__post_init__` checks theirs (the error then names the config key of the class that refused).
-The defaults equal the values each entry point's base YAML sets (conf/README.md, "Where a default
-lives"; tests/test_config_defaults.py).
+are, so there is no second, hand-written copy of their fields.
+
+One home per default: each schema is registered in Hydra's ConfigStore as `<app>_schema` (`store_schemas`) and
+is the first item of `conf/<app>.yaml`'s defaults list, so Hydra composes every YAML file onto it: a field no
+file sets keeps its dataclass default, and the YAML files hold only what differs from it (conf/README.md,
+"Where a default lives"; `tests/test_config_defaults.py` fails on a file that restates a default). Hydra
+checks keys and types while it composes; `typed_config` is the one conversion to the dataclasses,
+`at_least` / `above` on this module's fields check ranges naming the full key (`train_env.batch_size=0:
+must be >= 1`), and the library dataclasses' own `__post_init__` checks theirs (the error then names the
+config key of the class that refused).
 
 The `policy` node stays a plain mapping: each architecture has its own fields and
 `policies.make_policy` rejects unknown ones with the field named.
@@ -27,7 +31,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from planners import NavMeshSettings
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.envs.config import CameraConfig, NavEnvConfig, TerminationConfig
+from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.gsfit.trainer import FitConfig
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
@@ -119,13 +123,6 @@ class SceneGroup:
         _check_generator("scene", self.generator, self.size)
 
 
-def robot_navmesh() -> NavMeshSettings:
-    """`conf/navigation/default.yaml`'s agent, a Unitree Go1 (the sources of its numbers are in that file);
-    `planners.NavMeshSettings()` alone stays Recast's demo agent (`navigation=recast`)."""
-    return NavMeshSettings(cell_height=0.05, agent_height=0.5, agent_radius=0.35, agent_max_climb=0.15,
-                           agent_max_slope=30.0)
-
-
 @dataclass
 class NavigationGroup:
     """`conf/navigation/default.yaml`: how a scene becomes walkable. Composed by prepare, train,
@@ -133,7 +130,7 @@ class NavigationGroup:
 
     prepare: bool = True  # build/refresh collision mesh + navmesh with these settings before use
     collision: CollisionSettings = field(default_factory=CollisionSettings)
-    navmesh: NavMeshSettings = field(default_factory=robot_navmesh)  # up_axis: always the scene's
+    navmesh: NavMeshSettings = field(default_factory=NavMeshSettings)  # up_axis: always the scene's
 
 
 # ------------------------------------------------------------------------------ train
@@ -214,7 +211,6 @@ class RenderSettings:
     # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
     lod_px: Optional[float] = DEFAULT_LOD_PX
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
-    backend: str = "fused"  # fused (render/fused.py, CPU) | torch (the reference) | compiled | gsplat (CUDA extra)
 
 
 @dataclass
@@ -233,16 +229,11 @@ class EvalSettings:
     blank_camera_rows: bool = True  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
 
 
-def train_env_config() -> NavEnvConfig:
-    """`train.yaml`'s `env`: episodes of at most 100 steps, interventions sooner than the env's defaults."""
-    return NavEnvConfig(termination=TerminationConfig(max_steps=100, no_progress_steps=30, stuck_steps=10))
-
-
 @dataclass
 class TrainConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=train_env_config)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
     policy: Dict[str, Any] = field(default_factory=dict)
     algo: AlgoGroup = field(default_factory=AlgoGroup)
     collector: CollectorGroup = field(default_factory=CollectorGroup)
@@ -254,7 +245,6 @@ class TrainConfig:
     progress: bool = True
     run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
     init_checkpoint: Optional[str] = None
-    demo_preset: str = "tiny"
     goal_input: str = "route"  # route | goal (rl/route_goal.py)
     route_lookahead: float = above(0, 3.0)
     save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
@@ -398,38 +388,25 @@ class MakeEnvEpisodes:
     goal_images: bool = False
 
 
-MAIN_JOB_CAMERA_PX = 32  # the main job's camera (`+exp=citywalker_rl`: the policy's 32 px input) ...
-MAIN_JOB_LOD_PX = 2.0  # ... at its 2-px level of detail (conf/exp/citywalker_rl.yaml)
-
-
-def policy_facing_env_config() -> NavEnvConfig:
-    """`make_env.yaml`'s `env`: observations without ground truth, episode metrics and video pixels, the main
-    job's camera size."""
-    c = NavEnvConfig(privileged=False, episode_metrics=True, finished_records=False, pixels=True)
-    c.camera = dataclasses.replace(c.camera, width=MAIN_JOB_CAMERA_PX, height=MAIN_JOB_CAMERA_PX)
-    return c
-
-
 @dataclass
 class MakeEnvConfig:
     """`conf/make_env.yaml`: `wanderland_nav.make_env`, one TorchRL env from Python."""
 
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=policy_facing_env_config)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
     batch_size: int = 1
     device: str = "cpu"
     seed: Optional[int] = None  # null: 0 in the main process, a distinct seed per worker process (make_env.process_seed)
-    demo_preset: str = "tiny"
     episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
-    render: RenderSettings = field(default_factory=lambda: RenderSettings(lod_px=MAIN_JOB_LOD_PX))
+    render: RenderSettings = field(default_factory=RenderSettings)
 
 # ------------------------------------------------------------------------------ benchmark / serve_policy
 @dataclass
 class BenchmarkConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=train_env_config)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
     tasks: List[str] = field(default_factory=lambda: ["pointgoal", "imagegoal", "instruction"])
     pointgoal_input: str = "goal"        # goal: the final goal's vector | route: the route point ahead (CityWalker)
     route_lookahead: float = 3.0
@@ -474,10 +451,22 @@ SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareC
            "benchmark": BenchmarkConfig, "serve_policy": ServePolicyConfig}
 
 
+def store_schemas() -> None:
+    """Every entry point's schema in Hydra's ConfigStore as `<app>_schema`, the base its `conf/<app>.yaml` extends
+    (first in its defaults list). Frozen library dataclasses are stored writable, so the YAML can be merged in."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    for app, schema in SCHEMAS.items():
+        store.store(name=f"{app}_schema", node=_writable(OmegaConf.structured(schema)), provider="wanderland_nav")
+
+
 def typed_config(cfg: DictConfig | dict, schema: type):
     """The composed config as `schema`'s dataclasses; an unknown key or a wrong type raises with its
     full key (`env.camera.widht`), a range error with the dataclass field (from `__post_init__`)."""
     node = _writable(OmegaConf.structured(schema))
+    if isinstance(cfg, DictConfig):  # as plain containers: a key Hydra added past the schema (`+key=`) is refused
+        cfg = OmegaConf.to_container(cfg, resolve=False)
     merged = OmegaConf.merge(node, cfg)
     try:
         obj = _tuples(OmegaConf.to_object(merged))

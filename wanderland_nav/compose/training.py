@@ -50,7 +50,7 @@ def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
 
 def _single_scene(c: TrainConfig):
     """(scene, identity's scene part, env_cfg -> (eval scenes, env_fn, bc_env_fn))."""
-    scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
+    scene = prepared_scene(c.scene, c.navigation)
     if c.episodes.path is not None:
         scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                               generator=GeneratorSettings(goal_images=c.episodes.goal_images))
@@ -118,7 +118,6 @@ def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     run_dir = checked_run_dir(c, identity)
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
-    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     t = time.perf_counter()
     eval_scenes, env_fn, bc_env_fn = envs(env_cfg)
     log.info("eval env built in %.1fs", time.perf_counter() - t)

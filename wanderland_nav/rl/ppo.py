@@ -58,8 +58,8 @@ IS_WEIGHT = "importance_weight"
 
 @dataclass
 class PPOConfig:
-    """PPO sizes and rates; the defaults are the main job's (`conf/algo/ppo.yaml`, equal by
-    tests/test_config_defaults.py)."""
+    """PPO sizes and rates; the defaults are the main job's (the home of each: `conf/algo/ppo.yaml` holds only what
+    differs, checked by tests/test_config_defaults.py)."""
 
     total_frames: int = 44_800         # env steps summed over the batch (the main job's 56 iterations)
     frames_per_batch: int = 800        # per collector iteration (8 agents x 100 steps)
