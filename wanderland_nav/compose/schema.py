@@ -109,8 +109,8 @@ class SceneSetSettings:
 class SceneGroup:
     """`conf/scene/*.yaml`: the procedural demo (`demo: true`) or a scene folder (`scene=<path>`)."""
 
-    name: str = "demo"
-    path: str = "data/scenes/demo"
+    name: str = "demo"  # the scene's name in tables and run folders (a folder: its basename)
+    path: str = "data/scenes/demo"  # the scene folder (the demo / a district: where it is built)
     demo: bool = True  # the procedural demo (`conf/scene/demo.yaml`); a folder sets false
     seed: int = 0  # demo / district only
     preset: str = "default"  # demo only: "tiny" | "default"
@@ -136,13 +136,10 @@ class NavigationGroup:
 # ------------------------------------------------------------------------------ train
 @dataclass
 class BCStage(BCConfig):
-    enabled: bool = True
-
-
+    enabled: bool = True  # run the BC phase (skipped anyway with init_checkpoint)
 @dataclass
 class PPOStage(PPOConfig):
-    enabled: bool = True
-
+    enabled: bool = True  # run the PPO phase (false: `algo=bc`)
     def __post_init__(self):
         if not self.enabled:  # a disabled stage's sizes are never used (conf/algo/bc.yaml)
             return
@@ -154,7 +151,7 @@ class PPOStage(PPOConfig):
 
 @dataclass
 class AlgoGroup:
-    name: str = "rl"
+    name: str = "rl"  # the recipe's name in `exp_name` (rl | bc | rl_long)
     bc: BCStage = field(default_factory=BCStage)
     ppo: PPOStage = field(default_factory=PPOStage)
 
@@ -174,7 +171,7 @@ class CollectorGroup:
     `kind: ray`, `num_workers` TorchRL Ray collectors (`rl/ray_collector.py`), one machine or a cluster."""
 
     kind: str = "local"  # local | ray
-    num_workers: int = at_least(1, 1)
+    num_workers: int = at_least(1, 1)  # collector processes (local) or Ray actors, each with its own env
     address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
     cpus_per_worker: float = above(0, 1.0)  # ray
     memory_per_worker_gb: Optional[float] = above(0, None)  # ray
@@ -199,8 +196,8 @@ class EpisodeSource:
     path: Optional[str] = None  # an episodes.json instead of <scene>/episodes.json
     num: Optional[int] = at_least(1, 400)  # null: the scene's own file as it is; else a sibling file with this many (compose/episode_file.py)
     splits: Tuple[float, float, float] = (0.6, 0.15, 0.25)  # train / val / test fractions
-    seed: int = 0
-    goal_images: bool = False
+    seed: int = 0  # the generated episodes' sampler seed
+    goal_images: bool = False  # render goal views into generated episodes (image-goal tasks)
     ppo_routes: int = at_least(0, 0)  # PPO also trains on this many more routes (a train-only file drawn with ppo_routes_seed)
     ppo_routes_seed: int = 1  # must differ from `seed`: the same seed would redraw the val/test routes
 
@@ -209,22 +206,20 @@ class EpisodeSource:
 class RenderSettings:
     # Level of detail (render/lod.py): each view renders the coarsest hierarchy nodes whose bounding sphere
     # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
-    lod_px: Optional[float] = DEFAULT_LOD_PX
+    lod_px: Optional[float] = DEFAULT_LOD_PX  # pixels: the cut's largest projected node radius; null: every Gaussian
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
 
 
 @dataclass
 class TrainEnvSettings:
-    batch_size: int = at_least(1, 8)
-    split: Optional[str] = "train"
-
-
+    batch_size: int = at_least(1, 8)  # agents stepped together by BC and PPO (B)
+    split: Optional[str] = "train"  # episodes.json split the training envs draw from
 @dataclass
 class EvalSettings:
-    split: Optional[str] = "test"
-    episodes: Optional[int] = at_least(1, None)
-    batch_size: int = at_least(1, 25)
-    deterministic: bool = True
+    split: Optional[str] = "test"  # headline split (tune with eval.split=val); null: every episode
+    episodes: Optional[int] = at_least(1, None)  # null: every episode of the split, once
+    batch_size: int = at_least(1, 25)  # agents rendered in one batched evaluation call
+    deterministic: bool = True  # evaluate the policy's mean action (false: sampled)
     sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; report.SAMPLED)
     blank_camera_rows: bool = True  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
 
@@ -238,15 +233,15 @@ class TrainConfig:
     algo: AlgoGroup = field(default_factory=AlgoGroup)
     collector: CollectorGroup = field(default_factory=CollectorGroup)
     logger: LoggerGroup = field(default_factory=LoggerGroup)
-    exp_name: str = "run"
-    seed: int = 0
-    device: str = "cpu"
-    threads: Optional[int] = at_least(1, None)
-    progress: bool = True
+    exp_name: str = "run"  # the run folder's experiment name (default: ${policy.name}_${algo.name})
+    seed: int = 0  # policy init, episode order, PPO sampling
+    device: str = "cpu"  # where the policy and the env's tensors live (cpu | cuda)
+    threads: Optional[int] = at_least(1, None)  # torch intra-op threads (null: torch's default)
+    progress: bool = True  # tqdm bars
     run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
-    init_checkpoint: Optional[str] = None
+    init_checkpoint: Optional[str] = None  # warm-start weights (a *_bc run's checkpoints/last.pt); skips the BC phase
     goal_input: str = "route"  # route | goal (rl/route_goal.py)
-    route_lookahead: float = above(0, 3.0)
+    route_lookahead: float = above(0, 3.0)  # metres ahead on the planned route of the `goal_input: route` point
     save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
     episodes: EpisodeSource = field(default_factory=EpisodeSource)
     render: RenderSettings = field(default_factory=RenderSettings)
