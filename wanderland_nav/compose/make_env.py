@@ -17,7 +17,6 @@ Keyword overrides are spelled as on the command line, one per config key: `batch
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import multiprocessing

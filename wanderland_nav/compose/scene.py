@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 
 from planners import NavMesh
 from wanderland_nav.compose.cli import CONF_DIR
-from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, typed_config
+from wanderland_nav.compose.schema import NavigationGroup, PrepareConfig, SceneGroup, typed_config
 from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
 from wanderland_nav.scene import load_scene, make_demo_scene, make_generated_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
@@ -68,8 +68,9 @@ def navigation_tag(navigation: NavigationGroup | None) -> str:
 
 @functools.lru_cache(maxsize=1)
 def default_navigation() -> NavigationGroup:
-    """The `navigation` every entry point composes by default: `conf/navigation/default.yaml` over the dataclass."""
-    return typed_config(OmegaConf.load(CONF_DIR / "navigation" / "default.yaml"), NavigationGroup)
+    """The `navigation` every entry point composes by default: `conf/navigation/default.yaml` over the dataclass
+    (typed through `prepare`'s schema, the smallest that holds the group, whose node is built once)."""
+    return typed_config({"navigation": OmegaConf.load(CONF_DIR / "navigation" / "default.yaml")}, PrepareConfig).navigation
 
 
 def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, force: bool = False, bake_navmesh: bool = True, prepare: bool | None = None):

@@ -21,7 +21,9 @@ The `policy` node stays a plain mapping: each architecture has its own fields an
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import math
 import typing
 from dataclasses import dataclass, field
@@ -50,23 +52,6 @@ def at_least(low: float, default, *, strict: bool = False):
 
 def above(low: float, default):
     return at_least(low, default, strict=True)
-
-
-def _check_ranges(obj, prefix: str = "") -> None:
-    """Every `at_least` / `above` field of `obj` and its nested dataclasses, with the full key in the error; and
-    every number finite (a library class's `> 0` lets `inf` through, and NaN fails no `if x < low`)."""
-    for f in dataclasses.fields(obj):
-        value, key = getattr(obj, f.name), f"{prefix}{f.name}"
-        if dataclasses.is_dataclass(value):
-            _check_ranges(value, key + ".")
-        elif "min" in f.metadata and value is not None:
-            low, strict = f.metadata["min"], f.metadata["strict"]
-            if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
-                raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
-        else:
-            numbers = value if isinstance(value, (list, tuple)) else [value]
-            if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
-                raise ValueError(f"{key}={value}: must be a finite number")
 
 
 # ------------------------------------------------------------------------------ shared groups
@@ -152,8 +137,8 @@ class PPOStage(PPOConfig):
 @dataclass
 class AlgoGroup:
     name: str = "rl"  # the recipe's name in `exp_name` (rl | bc | rl_long)
-    bc: BCStage = field(default_factory=BCStage)
     ppo: PPOStage = field(default_factory=PPOStage)
+    bc: BCStage = field(default_factory=BCStage)
 
 
 @dataclass
@@ -181,14 +166,6 @@ class CollectorGroup:
     def __post_init__(self):
         if self.kind not in ("local", "ray"):
             raise ValueError(f"collector.kind={self.kind!r}: expected local or ray")
-
-    def ray_options(self) -> Optional[dict]:
-        """`make_collector`'s `ray` options; None for the local collectors."""
-        if self.kind != "ray":
-            return None
-        return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
-                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s,
-                "worker_niceness": self.worker_niceness}
 
 
 @dataclass
@@ -226,11 +203,10 @@ class EvalSettings:
 
 @dataclass
 class TrainConfig:
+    """`conf/train.yaml`. The fields run from the composition's own groups down the layers (the recipe, the env,
+    the navigation settings): the typed checks run in field order, so a reader following them never climbs back."""
+
     scene: SceneGroup = field(default_factory=SceneGroup)
-    navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=NavEnvConfig)
-    policy: Dict[str, Any] = field(default_factory=dict)
-    algo: AlgoGroup = field(default_factory=AlgoGroup)
     collector: CollectorGroup = field(default_factory=CollectorGroup)
     logger: LoggerGroup = field(default_factory=LoggerGroup)
     exp_name: str = "run"  # the run folder's experiment name (default: ${policy.name}_${algo.name})
@@ -247,6 +223,10 @@ class TrainConfig:
     render: RenderSettings = field(default_factory=RenderSettings)
     train_env: TrainEnvSettings = field(default_factory=TrainEnvSettings)
     eval: EvalSettings = field(default_factory=EvalSettings)
+    policy: Dict[str, Any] = field(default_factory=dict)
+    algo: AlgoGroup = field(default_factory=AlgoGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
 
 
 # ------------------------------------------------------------------------------ evaluate
@@ -453,22 +433,51 @@ def store_schemas() -> None:
 
     store = ConfigStore.instance()
     for app, schema in SCHEMAS.items():
-        store.store(name=f"{app}_schema", node=_writable(OmegaConf.structured(schema)), provider="wanderland_nav")
+        store.store(name=f"{app}_schema", node=copy.deepcopy(schema_node(schema)), provider="wanderland_nav")
+
+
+@functools.lru_cache(maxsize=None)
+def schema_node(schema: type) -> DictConfig:
+    """`schema` as an OmegaConf node with every default, built once per class (merging never changes it): the
+    frozen library dataclasses' read-only flags cleared, so YAML can be merged in (`to_object` still builds them
+    frozen)."""
+    return _writable(OmegaConf.structured(schema))
 
 
 def typed_config(cfg: DictConfig | dict, schema: type):
     """The composed config as `schema`'s dataclasses; an unknown key or a wrong type raises with its
     full key (`env.camera.widht`), a range error with the dataclass field (from `__post_init__`)."""
-    node = _writable(OmegaConf.structured(schema))
+    node = schema_node(schema)
     if isinstance(cfg, DictConfig):  # as plain containers: a key Hydra added past the schema (`+key=`) is refused
         cfg = OmegaConf.to_container(cfg, resolve=False)
     merged = OmegaConf.merge(node, cfg)
     try:
-        obj = _tuples(OmegaConf.to_object(merged))
+        obj = OmegaConf.to_object(merged)
     except ValueError as e:  # a library dataclass's own range check names its class: add the config key
         where = _config_keys_of(schema).get(str(e).split(":")[0].split(".")[0].split(" ")[0])
         raise ValueError(f"{e} (config key: {where})" if where else str(e)) from None
-    _check_ranges(obj)
+    # One pass over the built dataclasses (here, not in helpers, so the checks are read in one place): the
+    # `tuple[...]` fields get their tuples back (OmegaConf returns lists; tuples are hashable and equal the
+    # defaults), every `at_least` / `above` field is in range with the full key in the error, and every number is
+    # finite (a library class's `> 0` lets `inf` through, and NaN fails no `if x < low`).
+    todo = [(obj, "")]
+    while todo:
+        node, prefix = todo.pop()
+        for f in dataclasses.fields(node):
+            value, key = getattr(node, f.name), f"{prefix}{f.name}"
+            if dataclasses.is_dataclass(value):
+                todo.append((value, key + "."))
+                continue
+            if isinstance(value, list) and str(f.type).startswith(("tuple", "Tuple")):
+                value = tuple(value)
+                object.__setattr__(node, f.name, value)  # frozen dataclasses too
+            if "min" in f.metadata and value is not None:
+                low, strict = f.metadata["min"], f.metadata["strict"]
+                if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
+                    raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
+            elif any(isinstance(v, float) and not math.isfinite(v) for v in
+                     (value if isinstance(value, (list, tuple)) else [value])):
+                raise ValueError(f"{key}={value}: must be a finite number")
     return obj
 
 
@@ -497,19 +506,6 @@ def _config_keys_of(schema: type, prefix: str = "") -> dict[str, str]:
                 out.setdefault(base.__name__, prefix + f.name)
             out.update({k: v for k, v in _config_keys_of(t, f"{prefix}{f.name}.").items() if k not in out})
     return out
-
-
-def _tuples(obj):
-    """OmegaConf returns lists for `tuple[...]` fields; give the dataclasses their tuples back (hashable,
-    equal to the defaults)."""
-    if dataclasses.is_dataclass(obj):
-        for f in dataclasses.fields(obj):
-            value = getattr(obj, f.name)
-            if isinstance(value, list) and str(f.type).startswith(("tuple", "Tuple")):
-                object.__setattr__(obj, f.name, tuple(value))  # frozen dataclasses too
-            else:
-                _tuples(value)
-    return obj
 
 
 def _writable(node: DictConfig) -> DictConfig:
