@@ -29,6 +29,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
+from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 from planners import NavMeshSettings
@@ -40,6 +41,7 @@ from wanderland_nav.render.lod import DEFAULT_LOD_PX
 from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.ppo import PPOConfig
 from wanderland_nav.scene.collision import CollisionSettings
+from wanderland_nav.scene.generated import GENERATORS
 
 
 # ------------------------------------------------------------------------------ ranges
@@ -56,7 +58,6 @@ def above(low: float, default):
 
 # ------------------------------------------------------------------------------ shared groups
 def _check_generator(where: str, generator: str, size: str) -> None:
-    from wanderland_nav.scene.generated import GENERATORS
 
     if generator not in GENERATORS:
         raise ValueError(f"{where}.generator={generator!r}: expected one of {list(GENERATORS)}")
@@ -429,7 +430,6 @@ SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareC
 def store_schemas() -> None:
     """Every entry point's schema in Hydra's ConfigStore as `<app>_schema`, the base its `conf/<app>.yaml` extends
     (first in its defaults list). Frozen library dataclasses are stored writable, so the YAML can be merged in."""
-    from hydra.core.config_store import ConfigStore
 
     store = ConfigStore.instance()
     for app, schema in SCHEMAS.items():
