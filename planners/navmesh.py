@@ -28,6 +28,9 @@ from planners.atomic import atomic_path
 from planners.frames import nav_from_scene_rotation
 from planners.heightfield import build_compact
 from planners.polygons import build_trimesh
+from planners.fields import GeodesicField
+from planners.motion import move_along_surface
+from planners.path import find_path, geodesic_distance
 from planners.settings import FORMAT_VERSION, NavMeshFileError, NavMeshSettings, OffMeshError
 from planners.threads import single_thread
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
@@ -568,23 +571,15 @@ class NavMesh:
     def find_path(self, start, goal, max_distance: float | None = None):
         """Exact shortest path (see path.find_path); endpoints snap within `max_distance`
         (default settings.snap_distance), farther ones raise OffMeshError."""
-        from planners.path import find_path
-
         return find_path(self, start, goal, max_distance=max_distance)
 
     def geodesic_distance(self, starts, goals, max_distance: float | None = None) -> torch.Tensor:
-        from planners.path import geodesic_distance
-
         return geodesic_distance(self, starts, goals, max_distance=max_distance)
 
     def distance_field(self, goals):
-        from planners.fields import GeodesicField
-
         return GeodesicField.build(self, goals)
 
     def move_along_surface(self, start, target):
-        from planners.motion import move_along_surface
-
         with single_thread():
             return move_along_surface(self, start, target)
 

@@ -40,7 +40,7 @@ class PolicyConfig:
     # When image encoders are frozen: "rl" = during RL fine-tuning only (the paper, appendix D: "update
     # only the policy"; BC still trains them), "always" = from construction (a pretrained backbone such
     # as DINOv2), "never". Booleans from older checkpoints read as before: true -> "always", false -> "rl".
-    freeze_encoder: str = "rl"
+    freeze_encoder: str = "rl"  # keep the image encoders fixed: never | rl (during PPO) | always
 
     def __post_init__(self):
         name = type(self).__name__

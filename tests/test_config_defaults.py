@@ -1,38 +1,58 @@
-"""One value per default: where an entry point's base config (`conf/<app>.yaml` with its default group
-options) sets a key, the typed schema's dataclass default for that key is the same value.
+"""One home per default: no YAML file under conf/ restates a value it would get anyway.
 
-Why: the YAML is what a run composes, records in `config.yaml` and hashes into its identity, so it is
-the home of every value an entry point runs with; the dataclasses carry the same numbers so that the
-library used from Python (`PPOConfig()`, `BCConfig()`, `FitConfig()`) behaves as the command line does.
-A value that differs on purpose belongs to a preset: a non-default group option (`algo=bc`,
-`navigation=street`), an experiment (`+exp=`, `+study=`) or `debug=smoke`. The policy files
-(`conf/policy/*.yaml`) are such presets: each policy's config dataclass keeps the released model's sizes,
-and the files choose the CPU-sized variants the demo trains.
+Every entry point's typed schema (`compose/schema.py`, registered in Hydra's ConfigStore as `<app>_schema`) is
+the first item of its `conf/<app>.yaml` defaults list, so Hydra composes every file onto the dataclasses: a key no
+file sets has its dataclass default. A file holds only what differs from what lies beneath it:
+- an entry point's file, a group option and a file it extends (`defaults: [- ppo]` in `algo/bc.yaml`): the schema's
+  default, overlaid by the extended files;
+- an overlay (`exp/`, `debug_sizes/`): the value the entry point's base composition already has.
+The `policy` node is a plain mapping (each architecture has its own fields), so its files are not checked here:
+each policy's config dataclass keeps the released model's sizes and the files choose the CPU-sized variants.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import typing
 from pathlib import Path
 
 import pytest
+import yaml
+from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 REPO = Path(__file__).resolve().parents[1]
 CONF = REPO / "conf"
-PRIMARIES = sorted(p.stem for p in CONF.glob("*.yaml"))
+MISSING = object()
 
 
-def _flat(obj, prefix: str = "") -> dict:
-    """Nested dicts/dataclasses -> {dotted key: leaf}."""
-    if dataclasses.is_dataclass(obj):
-        obj = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-    if not isinstance(obj, dict) or not obj:
-        return {prefix.rstrip("."): obj}
-    out = {}
-    for k, v in obj.items():
-        out.update(_flat(v, f"{prefix}{k}."))
+def _defaults(cls) -> dict:
+    """The schema's defaults as nested dicts; an optional block (`scene.set: null`) as its dataclass's defaults."""
+    hints, inst, out = typing.get_type_hints(cls), cls(), {}
+    for f in dataclasses.fields(cls):
+        value, hint = getattr(inst, f.name), hints[f.name]
+        inner = [a for a in typing.get_args(hint) if a is not type(None)]
+        sub = hint if dataclasses.is_dataclass(hint) else inner[0] if len(inner) == 1 and dataclasses.is_dataclass(
+            inner[0]) else None
+        out[f.name] = _defaults(sub) if sub is not None and value is None else (
+            dataclasses.asdict(value) if dataclasses.is_dataclass(value) else value)
     return out
+
+
+def _leaves(d, prefix=""):
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            yield from _leaves(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
+
+
+def _at(d, key):
+    for k in key.split("."):
+        if not isinstance(d, dict) or k not in d:
+            return MISSING
+        d = d[k]
+    return d
 
 
 def _same(a, b) -> bool:
@@ -43,39 +63,95 @@ def _same(a, b) -> bool:
     return a == b  # 3 == 3.0: YAML writes floats without the point
 
 
-def _yaml_leaves(cfg) -> dict:
-    """{dotted key: value} of a composed config; a value derived from others (`${policy.name}_${algo.name}`)
-    has no default of its own and is left out."""
-    return {key: value for key, value in _flat(OmegaConf.to_container(cfg, resolve=False)).items()
-            if not (isinstance(value, str) and "${" in value)}
+def restatements(values: dict, reference: dict, where: str) -> list[str]:
+    """`where: key = v` for every leaf of `values` equal to the reference's value at that key."""
+    return [f"{where}: {key} = {value!r}" for key, value in _leaves(values)
+            if (ref := _at(reference, key)) is not MISSING and _same(value, ref)]
 
 
-def disagreements(primary: str) -> list[str]:
-    """`key: yaml <v> != dataclass <d>` for every key the base composition of `primary` sets to another
-    value than its schema's default."""
-    from hydra import compose, initialize_config_dir
+def _body(path: Path) -> dict:
+    return {k: v for k, v in (yaml.safe_load(path.read_text()) or {}).items() if k not in ("defaults", "hydra")}
 
+
+def _extended(path: Path) -> list[Path]:
+    """The files of the same group `path` extends (`defaults: [- default, _self_]`), deepest first."""
+    items = (yaml.safe_load(path.read_text()) or {}).get("defaults", [])
+    bases = [path.with_name(f"{i}.yaml") for i in items if isinstance(i, str) and i != "_self_"
+             and path.with_name(f"{i}.yaml").is_file()]
+    return [p for b in bases for p in (*_extended(b), b)]
+
+
+def _overlay(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _overlay(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _primaries_using(group: str) -> list[str]:
+    found = []
+    for p in sorted(CONF.glob("*.yaml")):
+        for item in (yaml.safe_load(p.read_text()) or {}).get("defaults", []):
+            if isinstance(item, dict) and any(k.split("@")[0] == group for k in item):
+                found.append(p.stem)
+    return found
+
+
+def _checks() -> list[tuple[Path, str, str, bool]]:
+    """(file, entry point, package, overlay?) for every file that sets values."""
+    out = []
+    for path in sorted(CONF.rglob("*.yaml")):
+        rel = path.relative_to(CONF)
+        glob = (path.read_text().splitlines() or [""])[0].strip() == "# @package _global_"
+        if len(rel.parts) == 1:
+            out.append((path, rel.stem, "", False))
+        elif rel.parts[0] == "exp":
+            out.append((path, "train", "", True))
+        elif rel.parts[0] == "debug_sizes":
+            app = rel.stem.removeprefix("smoke_")
+            out.append((path, app, "study_debug." if app == "study" else "", True))
+        elif rel.parts[0] == "study":
+            out.append((path, "study", "study.", False))
+        elif rel.parts[0] not in ("debug", "policy"):
+            for app in _primaries_using(rel.parts[0])[:1]:  # the group's type is the same in every entry point
+                out.append((path, app, "" if glob else rel.parts[0] + ".", False))
+    return out
+
+
+CHECKS = _checks()
+
+
+@pytest.mark.parametrize("path,app,package,overlay", CHECKS, ids=[str(c[0].relative_to(CONF)) for c in CHECKS])
+def test_no_yaml_file_restates_what_lies_beneath_it(path, app, package, overlay):
     from wanderland_nav.compose import SCHEMAS
 
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(primary)
-    return compare(_yaml_leaves(cfg), _flat(SCHEMAS[primary]()), primary)
+    if overlay:
+        with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+            reference = OmegaConf.to_container(compose(app), resolve=False)
+    else:
+        reference = _defaults(SCHEMAS[app])
+        for base in _extended(path):
+            reference = _overlay(reference, _nest(package, _body(base)))
+    values = {k: v for k, v in _nest(package, _body(path)).items() if k != "policy"}  # a plain mapping: see above
+    found = restatements(values, reference, str(path.relative_to(CONF)))
+    assert not found, ("these values are what the file gets anyway (the dataclass default, or the file beneath "
+                       "it): delete them from the YAML\n" + "\n".join(found))
 
 
-def compare(values: dict, defaults: dict, where: str) -> list[str]:
-    """The keys of `values` that `defaults` also has, with another value."""
-    return [f"{where}: {key}: yaml {value!r} != dataclass {defaults[key]!r}" for key, value in sorted(values.items())
-            if key in defaults and not _same(value, defaults[key])]
+def _nest(package: str, body: dict) -> dict:
+    for part in reversed([p for p in package.split(".") if p]):
+        body = {part: body}
+    return body
 
 
-@pytest.mark.parametrize("primary", PRIMARIES)
-def test_base_config_and_dataclass_defaults_agree(primary):
-    found = disagreements(primary)
-    assert not found, "the YAML and the dataclass default differ (one value, two homes):\n" + "\n".join(found)
+def test_every_entry_point_extends_its_typed_schema():
+    for path in sorted(CONF.glob("*.yaml")):
+        first = (yaml.safe_load(path.read_text()) or {}).get("defaults", [None])[0]
+        assert first == f"{path.stem}_schema", f"{path.name}: its defaults list must start with {path.stem}_schema"
 
 
-def test_the_comparison_sees_what_differs():
-    """A passing run means agreement, not a blind check: values, types that matter, keys only one side has."""
-    found = compare({"a.b": 3, "a.c": [1, 2], "d": True, "e": None, "only_yaml": 1},
-                    {"a.b": 3.0, "a.c": (1, 3), "d": 1, "e": None, "only_dataclass": 2}, "app")
-    assert found == ["app: a.c: yaml [1, 2] != dataclass (1, 3)", "app: d: yaml True != dataclass 1"]
+def test_the_check_sees_a_restated_value():
+    """A passing run means no restatement, not a blind check: equal values (3 == 3.0, not True == 1) are found."""
+    found = restatements({"a": {"b": 3, "c": [1, 2]}, "d": 1, "e": None, "only_here": 1},
+                         {"a": {"b": 3.0, "c": (1, 3)}, "d": True, "e": None}, "app.yaml")
+    assert found == ["app.yaml: a.b = 3", "app.yaml: e = None"]

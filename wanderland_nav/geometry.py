@@ -74,9 +74,9 @@ def quat_wxyz_to_xyzw(q):
 
 
 def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
-    """wxyz quaternions `[..., 4]` (normalised here) -> rotation matrices `[..., 3, 3]`."""
-    q = q / q.norm(dim=-1, keepdim=True)
-    w, x, y, z = q.unbind(-1)
+    """wxyz quaternions `[..., 4]` (normalised here; a zero one gives the identity) -> rotation matrices
+    `[..., 3, 3]`. The project's one quaternion -> matrix routine (Gaussians' covariances, COLMAP poses, readers)."""
+    w, x, y, z = torch.nn.functional.normalize(q, dim=-1).unbind(-1)
     rows = [
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
@@ -86,7 +86,8 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
 
 
 def rotmat_to_quat(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices `[..., 3, 3]` -> unit wxyz quaternions `[..., 4]` with w >= 0.
+    """Rotation matrices `[..., 3, 3]` -> unit wxyz quaternions `[..., 4]` with w >= 0: the project's one matrix ->
+    quaternion routine (the hierarchy's merged Gaussians, COLMAP poses).
 
     Uses the largest-diagonal branch (Shepperd) so it is stable for every rotation.
     """

@@ -7,7 +7,7 @@ one table.
     python -m experiments.gpu.check summary --out DIR
 
 `parity`: the env's observations rendered by the torch renderer and by gsplat's CUDA kernels (the same env,
-seed and poses; `render.backend=gsplat`) compared: PSNR of RGB and the largest depth difference.
+seed and poses; `env.camera.render_backend=gsplat`) compared: PSNR of RGB and the largest depth difference.
 `env_fps`: agent-frames/s of `NavEnv.step_and_maybe_reset` driven by the expert (policy excluded), tiny demo
 scene at training's level of detail, for each B and square resolution (`experiments/bench_env.py`'s
 `bench_one`). `--dry` (CPU checks of this script): device cpu, gsplat not required (parity says skipped).
@@ -100,7 +100,7 @@ def env_fps(args) -> None:
             backends.add(r["backend"])
             print(f"  B={B:5d} {res:4d} px  {r['fps']:9.1f} agent-frames/s  render {r['render%']:.0f} %  "
                   f"camera backend {r['backend']}", flush=True)
-    # render.backend=fused (the default) is a CPU kernel: a CUDA splat renders on the torch path instead
+    # env.camera.render_backend=fused (the default) is a CPU kernel: a CUDA splat renders on the torch path instead
     write(args.out, "env_fps", "ok", time.perf_counter() - t0, figs,
           f"agent-frames/s, expert-driven, {args.steps} timed steps after a warm-up, device {args.device}, camera "
           f"backend {'/'.join(sorted(backends))} (the fused camera is CPU-only; CUDA renders with torch)")

@@ -73,9 +73,9 @@ fi
 record pytest_gpu "$(status_of $rc)" $((SECONDS - t)) "$note"
 
 # --- 3. renderer parity vs gsplat (60 s) and 4. env agent-frames/s (150 s). The env camera's default backend,
-# render.backend=fused, is a CPU kernel with no CUDA form: on CUDA the camera renders with the torch path
+# env.camera.render_backend=fused, is a CPU kernel with no CUDA form: on CUDA the camera renders with the torch path
 # (env_fps records the backend each row ran on); the dry run renders with the fused kernel on CPU.
-echo "note: the fused camera (render.backend=fused) is CPU-only; on $DEVICE the camera renders with $( [ "$DEVICE" = cpu ] && echo fused || echo 'the torch path' )"
+echo "note: the fused camera (env.camera.render_backend=fused) is CPU-only; on $DEVICE the camera renders with $( [ "$DEVICE" = cpu ] && echo fused || echo 'the torch path' )"
 timeout 60 "$PY" -m experiments.gpu.check parity --out "$OUT" --device "$DEVICE" --res 64 \
   || { rc=$?; [ -f "$OUT/parity.json" ] || record parity "$(status_of $rc)" 60 "no record written"; }
 # shellcheck disable=SC2086

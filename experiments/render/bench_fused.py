@@ -4,8 +4,8 @@
         [--views 8] [--repeat 3] [--root data/scenes/bench_fused] [--splats ../shared/data/splats]
 
 For every scene and resolution it renders the same `--views` capture views (a demo scene's own cameras; a
-bare splat gets orbit views, as `bench_lod.py`) with `render.backend=torch` (today's path, the reference)
-and `render.backend=fused`, one after the other, and prints one line:
+bare splat gets orbit views, as `bench_lod.py`) with `env.camera.render_backend=torch` (today's path, the reference)
+and `env.camera.render_backend=fused`, one after the other, and prints one line:
 
     scene res lod_px drawn | torch: 1 view/call, 8 views/call | fused: 1 view/call, 8 views/call |
     speed-up at 1 view/call, at 8 views/call | cut: torch, fused | PSNR fused vs torch

@@ -18,7 +18,7 @@ class CityWalkerConfig(PolicyConfig):
     vit: dict = field(default_factory=dict)  # DinoViT kwargs (embed_dim, depth, num_heads...) for small ViTs
     image_size: tuple[int, int] = (224, 224)
     dim: int = 256                       # transformer width
-    depth: int = 4
-    heads: int = 4
+    depth: int = 4  # transformer layers
+    heads: int = 4  # attention heads
     num_freqs: int = 6
     max_range: float = 50.0              # metres: Fourier normaliser for coordinates

@@ -23,6 +23,8 @@ import zlib
 
 import numpy as np
 import torch
+import sys
+import types
 
 RULE = ("fan-in-scaled normal weights sqrt(2/fan_in), norm scales 1+0.1N, biases/running_mean 0.1N, "
         "running_var U(0.5,1.5), num_batches_tracked 0, pos_enc as built; numpy PCG64 seeded (seed, crc32(key))")
@@ -77,8 +79,6 @@ def write_release_file(model: str, net: torch.nn.Module, path) -> None:
     checkpoint with `model.`-prefixed keys (CityWalker), or (GNM, ViNT) the pickled model object under `'model'`
     beside optimizer and scheduler, its class named as the official one (a stand-in module is registered under
     the official name while pickling, then removed). For smoke runs and tests where the real files are absent."""
-    import sys
-    import types
 
     fmt = RELEASE_FORMAT[model]
     if fmt[0] == "state_dict":

@@ -17,7 +17,7 @@ def _where_prepared(monkeypatch, app, schema, overrides):
     monkeypatch.setattr(scene, "make_demo_scene", lambda path, **kw: seen.setdefault("built", Path(path)))
     monkeypatch.setattr(scene, "prepare_scene", lambda path, **kw: seen.setdefault("prepared", (Path(path), kw)))
     c = typed_config(compose_config(app, overrides), schema)
-    scene.prepared_scene(c.scene, c.navigation, demo_preset=getattr(c, "demo_preset", None), prepare=True)
+    scene.prepared_scene(c.scene, c.navigation, prepare=True)
     assert seen["built"] == seen["prepared"][0]
     return seen["prepared"]
 
@@ -42,7 +42,6 @@ def test_make_env_without_a_policy_has_the_main_jobs_camera():
     main = typed_config(compose_config("train", ["+exp=citywalker_rl"]), TrainConfig)
     assert [env.env.camera.height, env.env.camera.width] == list(main.policy["image_size"]) == [32, 32]
     assert env.render.lod_px == main.render.lod_px == 2.0
-    assert MakeEnvConfig().env.camera.width == 32 and MakeEnvConfig().render.lod_px == 2.0  # the Python defaults too
     from wanderland_nav.compose.make_env import make_env
 
     assert "32 x 32 px" in make_env.__doc__ and "2-px" in make_env.__doc__

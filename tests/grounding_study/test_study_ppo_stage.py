@@ -177,7 +177,7 @@ def test_smoke_runs_a_staged_study_at_the_smoke_train_sizes():
                      TrainConfig).algo.ppo
     assert (p.total_frames, p.frames_per_batch, p.lr) == (16, 8, 5e-5)
     only_sizes = study_config(compose_config("study", ["+study=grounding", "debug=smoke",
-                                                       "+study.ppo_stage=['algo.ppo.total_frames=800']"]))
+                                                       "study.ppo_stage=['algo.ppo.total_frames=800']"]))
     assert only_sizes.study.ppo_stage == ["algo.ppo.enabled=true"]  # still staged: its cells are exercised
-    own = study_config(compose_config("study", ["+study=grounding", "debug=smoke", "+study.ppo_stage=['algo.ppo.lr=1e-4']"]))
+    own = study_config(compose_config("study", ["+study=grounding", "debug=smoke", "study.ppo_stage=['algo.ppo.lr=1e-4']"]))
     assert own.study.ppo_stage == ["algo.ppo.lr=1e-4"]

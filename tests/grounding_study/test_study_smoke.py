@@ -47,7 +47,7 @@ def test_study_smoke_runs_end_to_end_and_resumes(tiny_demo_scene, tmp_path):
     assert sorted(p.name for p in (cell / "checkpoints").glob("bc_round*.pt")) == ["bc_round1.pt", "bc_round2.pt"]
 
     # study.ppo_stage: PPO again from each train cell's BC; train cells and BC evaluations are reused as they are
-    staged = run(compose_config("study", [*overrides, "+study.ppo_stage=['algo.ppo.lr=1.0e-4']"]))
+    staged = run(compose_config("study", [*overrides, "study.ppo_stage=['algo.ppo.lr=1.0e-4']"]))
     after = json.loads((out / "done.json").read_text())
     reused = [k for k in manifest if k.startswith("train/") or k.endswith(":BC")]
     assert reused and all(after[k] == manifest[k] for k in reused)

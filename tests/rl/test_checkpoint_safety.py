@@ -52,7 +52,6 @@ def test_the_hostile_files_do_run_code_when_unpickled(tmp_path):
 
 def _loaders():
     from wanderland_nav.compose.checkpoints import policy_from_checkpoint
-    from wanderland_nav.compose.schema import TrainConfig
     from wanderland_nav.compose.training import checked_run_dir
 
     def resume(f):  # train's resume from <run_dir>/checkpoints/last.pt
@@ -62,7 +61,7 @@ def _loaders():
         run = f.parent / "run"
         (run / "checkpoints").mkdir(parents=True)
         (run / "checkpoints" / "last.pt").write_bytes(f.read_bytes())
-        return checked_run_dir(TrainConfig(run_dir=str(run)), {"hash": "0" * 64, "config": {}})
+        return checked_run_dir(run, {"hash": "0" * 64, "config": {}})
 
     return {"load_checkpoint": load_checkpoint,
             "init_checkpoint": lambda f: load_policy_weights(make_policy("cnn", image_size=(16, 16)), f),

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from wanderland_nav.compose.schema import CollectorGroup, typed_config
+from wanderland_nav.compose.training import ray_options
 
 TESTS = Path(__file__).resolve().parents[1]
 
@@ -18,7 +19,7 @@ def test_ray_options_come_from_the_collector_group():
     from omegaconf import OmegaConf
 
     def options(name):
-        return typed_config(OmegaConf.load(f"conf/collector/{name}.yaml"), CollectorGroup).ray_options()
+        return ray_options(typed_config(OmegaConf.load(f"conf/collector/{name}.yaml"), CollectorGroup))
 
     assert options("single") is None and options("multi") is None
     assert options("ray") == {"address": None, "cpus_per_worker": 1, "memory_per_worker_gb": None,

@@ -13,10 +13,12 @@ from wanderland_nav import keys
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import load_goal_images
 from wanderland_nav.envs.factory import make_nav_env
+from wanderland_nav.evaluation import EvalScene
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.render import Gaussians
 from wanderland_nav.render.lod import load_splat
 from wanderland_nav.rl.loggers import ConsoleCSVLogger
+from wanderland_nav.rl.route_goal import GoalInputEnvFn
 from wanderland_nav.scene.checks import check_splat_visible
 from wanderland_nav import viz
 
@@ -100,6 +102,21 @@ def env_factory(scene, episodes_path, env_cfg: NavEnvConfig, *, split, batch_siz
     return partial(make_nav_env, scene, episodes, navmesh, gaussians=gaussians, config=env_cfg,
                    batch_size=int(batch_size), device=device, seed=seed, goal_images=goal_images,
                    episodes_source=where if split is None else f"{where} (split {split})")
+
+
+def single_scene_envs(scene, episodes_path, ppo_files: list, env_cfg: NavEnvConfig, *, navmesh, lod_px, seed: int,
+                      device: str, eval_split, eval_batch_size: int, train_split, train_batch_size: int, goal: dict):
+    """`train`'s envs on one scene: ({scene name: EvalScene}, PPO's env fn, BC's env fn). The evaluation env is
+    built once and kept; BC trains on the episodes file's train split, PPO also on `ppo_files` beyond it. `goal`:
+    what the policy is told the goal is (`rl.route_goal.GoalInputEnvFn`)."""
+    parts = dict(navmesh=navmesh, seed=seed, device=device,
+                 gaussians=scene_gaussians(scene, lod_px, needed=env_cfg.camera.enabled))
+    eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=eval_split, batch_size=eval_batch_size,
+                                          **parts), **goal)()
+    train = partial(env_factory, scene, env_cfg=env_cfg, split=train_split, batch_size=train_batch_size, **parts)
+    bc_env_fn = GoalInputEnvFn(train(episodes_path), **goal)
+    env_fn = GoalInputEnvFn(train(ppo_files), **goal) if len(ppo_files) > 1 else bc_env_fn
+    return {scene.name: EvalScene(env=eval_env, episodes_path=episodes_path)}, env_fn, bc_env_fn
 
 
 def load_navmesh(scene):

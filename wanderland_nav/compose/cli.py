@@ -21,10 +21,13 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 from omegaconf import OmegaConf
 
+from wanderland_nav.compose.schema import store_schemas
+
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the package's link to the repository's conf/, shipped in the wheel
 
 # `${basename:${scene.path}}` in conf/scene/folder.yaml: a scene folder is named after itself
 OmegaConf.register_new_resolver("basename", lambda p: Path(str(p)).name, replace=True)
+store_schemas()  # `<app>_schema`, the typed base each conf/<app>.yaml extends (Hydra's registry, like the resolver)
 
 
 def hydra_quoted(value: str) -> str:

@@ -17,7 +17,6 @@ Keyword overrides are spelled as on the command line, one per config key: `batch
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import multiprocessing
@@ -80,25 +79,25 @@ def make_env(scene: str = "demo", *, policy=None, **overrides):
               every worker process (`process_seed`), so `ParallelEnv` / `MultiSyncCollector` workers built from
               one `make_env` walk different episodes; an explicit seed is used as given in every process
               (then seed the workers apart with `env.set_seed` / `collector.set_seed`).
-            - `demo_preset` ("tiny"): the demo's size ("default": 500k Gaussians).
             - `episodes`: `path` (an episodes.json instead of the scene's own), `num` (60) / `seed` (0) /
               `goal_images` (False) for the episodes generated when the scene has none.
             - `render`: `lod_px` (2.0: the level of detail, pixels; None: every Gaussian), `image_size` (None:
-              the policy's input size; with a policy only), `backend` ("torch" | "compiled" | "gsplat").
+              the policy's input size; with a policy only).
             - `env`: any `NavEnvConfig` field (`env={"camera": {"width": 64}}`, `env={"expert_action": True}`,
-              `env={"privileged": True}`, `env={"termination": {"max_steps": 200}}`); the defaults make it
+              `env={"privileged": True}`, `env={"termination": {"max_steps": 200}}`, `env={"camera": {"render_backend":
+              "torch"}}`); the defaults make it
               policy-facing: no `privileged/`, `("next", "episode", ...)` metrics, `pixels` for video.
-            - `scene`, `navigation`: the scene group's fields and the navmesh / collision settings
+            - `scene`, `navigation`: the scene group's fields (`scene={"preset": "default"}`: the 500k-Gaussian
+              demo instead of the tiny one) and the navmesh / collision settings
               (`navigation={"navmesh": {"agent_radius": 0.3}}`, `navigation={"prepare": False}`).
             - `debug` ("none" | "smoke"): the test sizes (`conf/debug_sizes/smoke_make_env.yaml`).
     """
     c = make_env_config(scene, **overrides)
     seed = c.seed if c.seed is not None else process_seed()
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
-    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
     if c.scene.set is not None:
         return _scene_set_env(c, env_cfg, seed)
-    loaded = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
+    loaded = prepared_scene(c.scene, c.navigation)
     loaded, episodes_path = scene_episodes(loaded, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                            generator=_generator(c.episodes.goal_images))
     gaussians = scene_gaussians(loaded, c.render.lod_px, needed=env_cfg.camera.enabled)

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
 import time
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
 from planners import NavMesh
-from wanderland_nav.compose.schema import NavigationGroup, SceneGroup
+from wanderland_nav.compose.cli import CONF_DIR
+from wanderland_nav.compose.schema import NavigationGroup, PrepareConfig, SceneGroup, typed_config
 from wanderland_nav.episodes.generate import refresh_if_stale, write_scene_episodes
 from wanderland_nav.scene import load_scene, make_demo_scene, make_generated_scene
 from wanderland_nav.scene.loader import SCENE_LAYOUTS, is_scene_folder
@@ -19,8 +23,7 @@ from wanderland_nav.preparation.scene import check_navmesh_frame, prepare_scene
 log = logging.getLogger(__name__)
 
 
-def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
-                 navigation: NavigationGroup | None = None) -> Path:
+def scene_folder(scene: SceneGroup, navigation: NavigationGroup | None = None) -> Path:
     """Where the scene lives; the demo (or a district, `scene.generator`) is made there on first use (idempotent). A
     non-default demo preset gets its own folder beside the default one (`<path>_<preset>`), and so do `navigation`
     settings other than the default ones (`<path>_nav<hash8>`): a generated scene's collision mesh, navmesh and
@@ -39,7 +42,7 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
         log.info("%s scene (seed %d, %s) ready at %s (%.1fs)", scene.generator, scene.seed, scene.size, path,
                  time.perf_counter() - t)
     elif scene.demo:
-        preset = demo_preset or scene.preset
+        preset = scene.preset
         path = path if preset == "default" else Path(f"{path}_{preset}")
         path = Path(f"{path}{navigation_tag(navigation)}")
         t = time.perf_counter()
@@ -51,23 +54,30 @@ def scene_folder(scene: SceneGroup, demo_preset: str | None = None,
 
 
 def navigation_tag(navigation: NavigationGroup | None) -> str:
-    """"" for the default collision and navmesh settings (or none given), else `_nav<hash8>` of them."""
+    """"" for the default collision and navmesh settings (`conf/navigation/default.yaml`, or none given), else
+    `_nav<hash8>` of them."""
     if navigation is None:
         return ""
     text = lambda n: json.dumps([dataclasses.asdict(n.collision), dataclasses.asdict(n.navmesh)],  # noqa: E731
                                 sort_keys=True)
     mine = text(navigation)
-    if mine == text(NavigationGroup()):
+    if mine == text(default_navigation()):
         return ""
     return "_nav" + hashlib.sha256(mine.encode()).hexdigest()[:8]
 
 
-def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, demo_preset: str | None = None,
-                   force: bool = False, bake_navmesh: bool = True, prepare: bool | None = None):
+@functools.lru_cache(maxsize=1)
+def default_navigation() -> NavigationGroup:
+    """The `navigation` every entry point composes by default: `conf/navigation/default.yaml` over the dataclass
+    (typed through `prepare`'s schema, the smallest that holds the group, whose node is built once)."""
+    return typed_config({"navigation": OmegaConf.load(CONF_DIR / "navigation" / "default.yaml")}, PrepareConfig).navigation
+
+
+def prepared_scene(scene: SceneGroup, navigation: NavigationGroup, *, force: bool = False, bake_navmesh: bool = True, prepare: bool | None = None):
     """The loaded Scene with collision mesh and navmesh built from `navigation` (skipped when up to
     date); with `prepare` (default `navigation.prepare`) false, a non-demo scene's artefacts on disk
     are used as they are."""
-    path = scene_folder(scene, demo_preset, navigation)
+    path = scene_folder(scene, navigation)
     prepare = navigation.prepare if prepare is None else prepare
     if not (prepare or scene.demo or force):
         loaded = load_scene(path, up_axis=scene.up_axis)

@@ -21,7 +21,10 @@ from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.schema import NavigationGroup, SceneGroup, SceneSetSettings
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
+from wanderland_nav.evaluation import EvalScene
 from wanderland_nav.preparation.scene_set import BatchReport, jobs_for, prepare_scene_set, run_batch
+from wanderland_nav.rl.route_goal import GoalInputEnvFn
+from wanderland_nav.rl.scene_sets import multi_scene_env_fn
 from wanderland_nav.scene import load_scene
 from wanderland_nav.scene.sets import scene_set_from_config
 
@@ -86,3 +89,20 @@ def scene_env_fn(paths: dict[str, str], env_cfg: NavEnvConfig, *, split, device:
                  lod_px: float | None = DEFAULT_LOD_PX):
     """A picklable `(scene_id, sub_batch, seed) -> NavEnv` over the prepared `paths`."""
     return partial(_scene_env, dict(paths), env_cfg, split, device, lod_px)
+
+
+def scene_set_envs(paths: dict[str, str], env_cfg: NavEnvConfig, *, device: str, lod_px, seed: int, eval_split,
+                   eval_batch_size: int, train_split, train_batch_size: int, num_active, memory_budget_gb,
+                   goal: dict):
+    """`train`'s envs over a set: ({scene id: EvalScene}, PPO's and BC's env fns: a `MultiSceneNavEnv` each over
+    every scene, BC's with global episode indices for its expert labels)."""
+    kw = dict(device=device, lod_px=lod_px)
+    train_scene_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=train_split, **kw), **goal)
+    multi = partial(multi_scene_env_fn, list(paths), train_scene_env, batch_size=train_batch_size,
+                    num_active=num_active, device=device, memory_budget_gb=memory_budget_gb, seed=seed)
+    env_fn = multi()
+    logging.getLogger("wanderland_nav.train").info("scene set: %d scenes, %d active at a time (BC and PPO)",
+                                                   len(paths), env_fn.keywords["num_active"])
+    eval_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=eval_split, **kw), **goal)
+    scenes = {sid: EvalScene(make=partial(eval_env, sid, eval_batch_size, seed)) for sid in paths}
+    return scenes, env_fn, multi(global_episodes=True)

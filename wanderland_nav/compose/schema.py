@@ -4,12 +4,16 @@ Why: a typo or a wrong type in a YAML file or on the command line must fail befo
 with the key named (`Key 'widht' not in 'CameraConfig' / full_key: env.camera.widht`), instead of
 falling back to a default. The library dataclasses (`NavEnvConfig`, `CollisionSettings`,
 `NavMeshSettings`, `BCConfig`, `PPOConfig`, `GeneratorSettings`, `FitConfig`) are used as they
-are, so there is no second, hand-written copy of their fields. `typed_config` is the one
-conversion; OmegaConf checks keys and types, `at_least` / `above` on this module's fields check ranges
-naming the full key (`train_env.batch_size=0: must be >= 1`), and the library dataclasses' own
-`__post_init__` checks theirs (the error then names the config key of the class that refused).
-The defaults equal the values each entry point's base YAML sets (conf/README.md, "Where a default
-lives"; tests/test_config_defaults.py).
+are, so there is no second, hand-written copy of their fields.
+
+One home per default: each schema is registered in Hydra's ConfigStore as `<app>_schema` (`store_schemas`) and
+is the first item of `conf/<app>.yaml`'s defaults list, so Hydra composes every YAML file onto it: a field no
+file sets keeps its dataclass default, and the YAML files hold only what differs from it (conf/README.md,
+"Where a default lives"; `tests/test_config_defaults.py` fails on a file that restates a default). Hydra
+checks keys and types while it composes; `typed_config` is the one conversion to the dataclasses,
+`at_least` / `above` on this module's fields check ranges naming the full key (`train_env.batch_size=0:
+must be >= 1`), and the library dataclasses' own `__post_init__` checks theirs (the error then names the
+config key of the class that refused).
 
 The `policy` node stays a plain mapping: each architecture has its own fields and
 `policies.make_policy` rejects unknown ones with the field named.
@@ -17,23 +21,27 @@ The `policy` node stays a plain mapping: each architecture has its own fields an
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import math
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
+from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 from planners import NavMeshSettings
 from wanderland_nav.compose.study_config import StudyConfig
-from wanderland_nav.envs.config import CameraConfig, NavEnvConfig, TerminationConfig
+from wanderland_nav.envs.config import CameraConfig, NavEnvConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.gsfit.trainer import FitConfig
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
 from wanderland_nav.rl.bc import BCConfig
 from wanderland_nav.rl.ppo import PPOConfig
 from wanderland_nav.scene.collision import CollisionSettings
+from wanderland_nav.scene.generated import GENERATORS
 
 
 # ------------------------------------------------------------------------------ ranges
@@ -48,26 +56,8 @@ def above(low: float, default):
     return at_least(low, default, strict=True)
 
 
-def _check_ranges(obj, prefix: str = "") -> None:
-    """Every `at_least` / `above` field of `obj` and its nested dataclasses, with the full key in the error; and
-    every number finite (a library class's `> 0` lets `inf` through, and NaN fails no `if x < low`)."""
-    for f in dataclasses.fields(obj):
-        value, key = getattr(obj, f.name), f"{prefix}{f.name}"
-        if dataclasses.is_dataclass(value):
-            _check_ranges(value, key + ".")
-        elif "min" in f.metadata and value is not None:
-            low, strict = f.metadata["min"], f.metadata["strict"]
-            if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
-                raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
-        else:
-            numbers = value if isinstance(value, (list, tuple)) else [value]
-            if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
-                raise ValueError(f"{key}={value}: must be a finite number")
-
-
 # ------------------------------------------------------------------------------ shared groups
 def _check_generator(where: str, generator: str, size: str) -> None:
-    from wanderland_nav.scene.generated import GENERATORS
 
     if generator not in GENERATORS:
         raise ValueError(f"{where}.generator={generator!r}: expected one of {list(GENERATORS)}")
@@ -105,8 +95,8 @@ class SceneSetSettings:
 class SceneGroup:
     """`conf/scene/*.yaml`: the procedural demo (`demo: true`) or a scene folder (`scene=<path>`)."""
 
-    name: str = "demo"
-    path: str = "data/scenes/demo"
+    name: str = "demo"  # the scene's name in tables and run folders (a folder: its basename)
+    path: str = "data/scenes/demo"  # the scene folder (the demo / a district: where it is built)
     demo: bool = True  # the procedural demo (`conf/scene/demo.yaml`); a folder sets false
     seed: int = 0  # demo / district only
     preset: str = "default"  # demo only: "tiny" | "default"
@@ -119,13 +109,6 @@ class SceneGroup:
         _check_generator("scene", self.generator, self.size)
 
 
-def robot_navmesh() -> NavMeshSettings:
-    """`conf/navigation/default.yaml`'s agent, a Unitree Go1 (the sources of its numbers are in that file);
-    `planners.NavMeshSettings()` alone stays Recast's demo agent (`navigation=recast`)."""
-    return NavMeshSettings(cell_height=0.05, agent_height=0.5, agent_radius=0.35, agent_max_climb=0.15,
-                           agent_max_slope=30.0)
-
-
 @dataclass
 class NavigationGroup:
     """`conf/navigation/default.yaml`: how a scene becomes walkable. Composed by prepare, train,
@@ -133,19 +116,16 @@ class NavigationGroup:
 
     prepare: bool = True  # build/refresh collision mesh + navmesh with these settings before use
     collision: CollisionSettings = field(default_factory=CollisionSettings)
-    navmesh: NavMeshSettings = field(default_factory=robot_navmesh)  # up_axis: always the scene's
+    navmesh: NavMeshSettings = field(default_factory=NavMeshSettings)  # up_axis: always the scene's
 
 
 # ------------------------------------------------------------------------------ train
 @dataclass
 class BCStage(BCConfig):
-    enabled: bool = True
-
-
+    enabled: bool = True  # run the BC phase (skipped anyway with init_checkpoint)
 @dataclass
 class PPOStage(PPOConfig):
-    enabled: bool = True
-
+    enabled: bool = True  # run the PPO phase (false: `algo=bc`)
     def __post_init__(self):
         if not self.enabled:  # a disabled stage's sizes are never used (conf/algo/bc.yaml)
             return
@@ -157,9 +137,9 @@ class PPOStage(PPOConfig):
 
 @dataclass
 class AlgoGroup:
-    name: str = "rl"
-    bc: BCStage = field(default_factory=BCStage)
+    name: str = "rl"  # the recipe's name in `exp_name` (rl | bc | rl_long)
     ppo: PPOStage = field(default_factory=PPOStage)
+    bc: BCStage = field(default_factory=BCStage)
 
 
 @dataclass
@@ -177,7 +157,7 @@ class CollectorGroup:
     `kind: ray`, `num_workers` TorchRL Ray collectors (`rl/ray_collector.py`), one machine or a cluster."""
 
     kind: str = "local"  # local | ray
-    num_workers: int = at_least(1, 1)
+    num_workers: int = at_least(1, 1)  # collector processes (local) or Ray actors, each with its own env
     address: Optional[str] = None  # ray: null starts a local instance; `auto` joins a running cluster
     cpus_per_worker: float = above(0, 1.0)  # ray
     memory_per_worker_gb: Optional[float] = above(0, None)  # ray
@@ -188,22 +168,14 @@ class CollectorGroup:
         if self.kind not in ("local", "ray"):
             raise ValueError(f"collector.kind={self.kind!r}: expected local or ray")
 
-    def ray_options(self) -> Optional[dict]:
-        """`make_collector`'s `ray` options; None for the local collectors."""
-        if self.kind != "ray":
-            return None
-        return {"address": self.address, "cpus_per_worker": self.cpus_per_worker,
-                "memory_per_worker_gb": self.memory_per_worker_gb, "sync_timeout_s": self.sync_timeout_s,
-                "worker_niceness": self.worker_niceness}
-
 
 @dataclass
 class EpisodeSource:
     path: Optional[str] = None  # an episodes.json instead of <scene>/episodes.json
     num: Optional[int] = at_least(1, 400)  # null: the scene's own file as it is; else a sibling file with this many (compose/episode_file.py)
     splits: Tuple[float, float, float] = (0.6, 0.15, 0.25)  # train / val / test fractions
-    seed: int = 0
-    goal_images: bool = False
+    seed: int = 0  # the generated episodes' sampler seed
+    goal_images: bool = False  # render goal views into generated episodes (image-goal tasks)
     ppo_routes: int = at_least(0, 0)  # PPO also trains on this many more routes (a train-only file drawn with ppo_routes_seed)
     ppo_routes_seed: int = 1  # must differ from `seed`: the same seed would redraw the val/test routes
 
@@ -212,56 +184,50 @@ class EpisodeSource:
 class RenderSettings:
     # Level of detail (render/lod.py): each view renders the coarsest hierarchy nodes whose bounding sphere
     # projects to at most this many pixels (radius); null: every Gaussian (the slow reference).
-    lod_px: Optional[float] = DEFAULT_LOD_PX
+    lod_px: Optional[float] = DEFAULT_LOD_PX  # pixels: the cut's largest projected node radius; null: every Gaussian
     image_size: Optional[List[int]] = None  # camera [H, W]; null: the policy's input size
-    backend: str = "fused"  # fused (render/fused.py, CPU) | torch (the reference) | compiled | gsplat (CUDA extra)
 
 
 @dataclass
 class TrainEnvSettings:
-    batch_size: int = at_least(1, 8)
-    split: Optional[str] = "train"
-
-
+    batch_size: int = at_least(1, 8)  # agents stepped together by BC and PPO (B)
+    split: Optional[str] = "train"  # episodes.json split the training envs draw from
 @dataclass
 class EvalSettings:
-    split: Optional[str] = "test"
-    episodes: Optional[int] = at_least(1, None)
-    batch_size: int = at_least(1, 25)
-    deterministic: bool = True
+    split: Optional[str] = "test"  # headline split (tune with eval.split=val); null: every episode
+    episodes: Optional[int] = at_least(1, None)  # null: every episode of the split, once
+    batch_size: int = at_least(1, 25)  # agents rendered in one batched evaluation call
+    deterministic: bool = True  # evaluate the policy's mean action (false: sampled)
     sampled_rows: bool = False  # also each trained row with sampled actions ("<row> sampled"; report.SAMPLED)
     blank_camera_rows: bool = True  # also each trained row with a black camera ("<row> blank camera"; rl/blank_camera.py)
 
 
-def train_env_config() -> NavEnvConfig:
-    """`train.yaml`'s `env`: episodes of at most 100 steps, interventions sooner than the env's defaults."""
-    return NavEnvConfig(termination=TerminationConfig(max_steps=100, no_progress_steps=30, stuck_steps=10))
-
-
 @dataclass
 class TrainConfig:
+    """`conf/train.yaml`. The fields run from the composition's own groups down the layers (the recipe, the env,
+    the navigation settings): the typed checks run in field order, so a reader following them never climbs back."""
+
     scene: SceneGroup = field(default_factory=SceneGroup)
-    navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=train_env_config)
-    policy: Dict[str, Any] = field(default_factory=dict)
-    algo: AlgoGroup = field(default_factory=AlgoGroup)
     collector: CollectorGroup = field(default_factory=CollectorGroup)
     logger: LoggerGroup = field(default_factory=LoggerGroup)
-    exp_name: str = "run"
-    seed: int = 0
-    device: str = "cpu"
-    threads: Optional[int] = at_least(1, None)
-    progress: bool = True
+    exp_name: str = "run"  # the run folder's experiment name (default: ${policy.name}_${algo.name})
+    seed: int = 0  # policy init, episode order, PPO sampling
+    device: str = "cpu"  # where the policy and the env's tensors live (cpu | cuda)
+    threads: Optional[int] = at_least(1, None)  # torch intra-op threads (null: torch's default)
+    progress: bool = True  # tqdm bars
     run_dir: Optional[str] = None  # null: outputs/<exp_name>/<identity hash>_seed<seed>
-    init_checkpoint: Optional[str] = None
-    demo_preset: str = "tiny"
+    init_checkpoint: Optional[str] = None  # warm-start weights (a *_bc run's checkpoints/last.pt); skips the BC phase
     goal_input: str = "route"  # route | goal (rl/route_goal.py)
-    route_lookahead: float = above(0, 3.0)
+    route_lookahead: float = above(0, 3.0)  # metres ahead on the planned route of the `goal_input: route` point
     save_rollouts: Optional[str] = None  # a folder: one rollout .npz per evaluation
     episodes: EpisodeSource = field(default_factory=EpisodeSource)
     render: RenderSettings = field(default_factory=RenderSettings)
     train_env: TrainEnvSettings = field(default_factory=TrainEnvSettings)
     eval: EvalSettings = field(default_factory=EvalSettings)
+    policy: Dict[str, Any] = field(default_factory=dict)
+    algo: AlgoGroup = field(default_factory=AlgoGroup)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
+    navigation: NavigationGroup = field(default_factory=NavigationGroup)
 
 
 # ------------------------------------------------------------------------------ evaluate
@@ -398,38 +364,25 @@ class MakeEnvEpisodes:
     goal_images: bool = False
 
 
-MAIN_JOB_CAMERA_PX = 32  # the main job's camera (`+exp=citywalker_rl`: the policy's 32 px input) ...
-MAIN_JOB_LOD_PX = 2.0  # ... at its 2-px level of detail (conf/exp/citywalker_rl.yaml)
-
-
-def policy_facing_env_config() -> NavEnvConfig:
-    """`make_env.yaml`'s `env`: observations without ground truth, episode metrics and video pixels, the main
-    job's camera size."""
-    c = NavEnvConfig(privileged=False, episode_metrics=True, finished_records=False, pixels=True)
-    c.camera = dataclasses.replace(c.camera, width=MAIN_JOB_CAMERA_PX, height=MAIN_JOB_CAMERA_PX)
-    return c
-
-
 @dataclass
 class MakeEnvConfig:
     """`conf/make_env.yaml`: `wanderland_nav.make_env`, one TorchRL env from Python."""
 
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=policy_facing_env_config)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
     batch_size: int = 1
     device: str = "cpu"
     seed: Optional[int] = None  # null: 0 in the main process, a distinct seed per worker process (make_env.process_seed)
-    demo_preset: str = "tiny"
     episodes: MakeEnvEpisodes = field(default_factory=MakeEnvEpisodes)
-    render: RenderSettings = field(default_factory=lambda: RenderSettings(lod_px=MAIN_JOB_LOD_PX))
+    render: RenderSettings = field(default_factory=RenderSettings)
 
 # ------------------------------------------------------------------------------ benchmark / serve_policy
 @dataclass
 class BenchmarkConfig:
     scene: SceneGroup = field(default_factory=SceneGroup)
     navigation: NavigationGroup = field(default_factory=NavigationGroup)
-    env: NavEnvConfig = field(default_factory=train_env_config)
+    env: NavEnvConfig = field(default_factory=NavEnvConfig)
     tasks: List[str] = field(default_factory=lambda: ["pointgoal", "imagegoal", "instruction"])
     pointgoal_input: str = "goal"        # goal: the final goal's vector | route: the route point ahead (CityWalker)
     route_lookahead: float = 3.0
@@ -474,17 +427,57 @@ SCHEMAS = {"train": TrainConfig, "evaluate": EvaluateConfig, "prepare": PrepareC
            "benchmark": BenchmarkConfig, "serve_policy": ServePolicyConfig}
 
 
+def store_schemas() -> None:
+    """Every entry point's schema in Hydra's ConfigStore as `<app>_schema`, the base its `conf/<app>.yaml` extends
+    (first in its defaults list). Frozen library dataclasses are stored writable, so the YAML can be merged in."""
+
+    store = ConfigStore.instance()
+    for app, schema in SCHEMAS.items():
+        store.store(name=f"{app}_schema", node=copy.deepcopy(schema_node(schema)), provider="wanderland_nav")
+
+
+@functools.lru_cache(maxsize=None)
+def schema_node(schema: type) -> DictConfig:
+    """`schema` as an OmegaConf node with every default, built once per class (merging never changes it): the
+    frozen library dataclasses' read-only flags cleared, so YAML can be merged in (`to_object` still builds them
+    frozen)."""
+    return _writable(OmegaConf.structured(schema))
+
+
 def typed_config(cfg: DictConfig | dict, schema: type):
     """The composed config as `schema`'s dataclasses; an unknown key or a wrong type raises with its
     full key (`env.camera.widht`), a range error with the dataclass field (from `__post_init__`)."""
-    node = _writable(OmegaConf.structured(schema))
+    node = schema_node(schema)
+    if isinstance(cfg, DictConfig):  # as plain containers: a key Hydra added past the schema (`+key=`) is refused
+        cfg = OmegaConf.to_container(cfg, resolve=False)
     merged = OmegaConf.merge(node, cfg)
     try:
-        obj = _tuples(OmegaConf.to_object(merged))
+        obj = OmegaConf.to_object(merged)
     except ValueError as e:  # a library dataclass's own range check names its class: add the config key
         where = _config_keys_of(schema).get(str(e).split(":")[0].split(".")[0].split(" ")[0])
         raise ValueError(f"{e} (config key: {where})" if where else str(e)) from None
-    _check_ranges(obj)
+    # One pass over the built dataclasses (here, not in helpers, so the checks are read in one place): the
+    # `tuple[...]` fields get their tuples back (OmegaConf returns lists; tuples are hashable and equal the
+    # defaults), every `at_least` / `above` field is in range with the full key in the error, and every number is
+    # finite (a library class's `> 0` lets `inf` through, and NaN fails no `if x < low`).
+    todo = [(obj, "")]
+    while todo:
+        node, prefix = todo.pop()
+        for f in dataclasses.fields(node):
+            value, key = getattr(node, f.name), f"{prefix}{f.name}"
+            if dataclasses.is_dataclass(value):
+                todo.append((value, key + "."))
+                continue
+            if isinstance(value, list) and str(f.type).startswith(("tuple", "Tuple")):
+                value = tuple(value)
+                object.__setattr__(node, f.name, value)  # frozen dataclasses too
+            if "min" in f.metadata and value is not None:
+                low, strict = f.metadata["min"], f.metadata["strict"]
+                if isinstance(value, bool) or not math.isfinite(value) or (value <= low if strict else value < low):
+                    raise ValueError(f"{key}={value}: must be {'>' if strict else '>='} {low:g}")
+            elif any(isinstance(v, float) and not math.isfinite(v) for v in
+                     (value if isinstance(value, (list, tuple)) else [value])):
+                raise ValueError(f"{key}={value}: must be a finite number")
     return obj
 
 
@@ -513,19 +506,6 @@ def _config_keys_of(schema: type, prefix: str = "") -> dict[str, str]:
                 out.setdefault(base.__name__, prefix + f.name)
             out.update({k: v for k, v in _config_keys_of(t, f"{prefix}{f.name}.").items() if k not in out})
     return out
-
-
-def _tuples(obj):
-    """OmegaConf returns lists for `tuple[...]` fields; give the dataclasses their tuples back (hashable,
-    equal to the defaults)."""
-    if dataclasses.is_dataclass(obj):
-        for f in dataclasses.fields(obj):
-            value = getattr(obj, f.name)
-            if isinstance(value, list) and str(f.type).startswith(("tuple", "Tuple")):
-                object.__setattr__(obj, f.name, tuple(value))  # frozen dataclasses too
-            else:
-                _tuples(value)
-    return obj
 
 
 def _writable(node: DictConfig) -> DictConfig:

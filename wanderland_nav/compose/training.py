@@ -3,7 +3,6 @@ run folder."""
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from functools import partial
@@ -11,21 +10,19 @@ from pathlib import Path
 
 import torch
 
-from wanderland_nav.compose.build import (check_policy_config, env_factory, load_navmesh, make_logger,
-                                          make_policy_from_config, scene_gaussians, shaped_env_config)
+from wanderland_nav.compose.build import (check_policy_config, load_navmesh, make_logger, make_policy_from_config,
+                                          shaped_env_config, single_scene_envs)
 from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
 from wanderland_nav.compose.identity import check_resume, run_identity, scene_identity
 from wanderland_nav.compose.policy_sources import released_weights
 from wanderland_nav.compose.scene import prepared_scene, scene_episodes
-from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn, scene_set_identity
-from wanderland_nav.compose.schema import TrainConfig
+from wanderland_nav.compose.scene_sets import ready_scene_set, scene_set_envs, scene_set_identity
+from wanderland_nav.compose.schema import CollectorGroup, TrainConfig
 from wanderland_nav.episodes.generate import GeneratorSettings
-from wanderland_nav.evaluation import EvalScene, Evaluator
+from wanderland_nav.evaluation import Evaluator
 from wanderland_nav.rl.checkpoint import load_checkpoint, load_policy_weights
 from wanderland_nav.rl.recipe import Recipe
-from wanderland_nav.rl.route_goal import GoalInputEnvFn
-from wanderland_nav.rl.scene_sets import multi_scene_env_fn
 from wanderland_nav.scene import load_scene
 
 log = logging.getLogger("wanderland_nav.train")
@@ -36,9 +33,17 @@ def default_run_dir(c: TrainConfig, identity: dict) -> Path:
     return Path("outputs") / c.exp_name / f"{identity['hash'][:8]}_seed{c.seed}"
 
 
-def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
-    """The run folder; one holding a checkpoint of another identity is refused with what differs."""
-    run_dir = Path(c.run_dir) if c.run_dir else default_run_dir(c, identity)
+def ray_options(collector: CollectorGroup) -> dict | None:
+    """The Ray collectors' options for `rl.make_collector`; None for the local collectors."""
+    if collector.kind != "ray":
+        return None
+    return {"address": collector.address, "cpus_per_worker": collector.cpus_per_worker,
+            "memory_per_worker_gb": collector.memory_per_worker_gb, "sync_timeout_s": collector.sync_timeout_s,
+            "worker_niceness": collector.worker_niceness}
+
+
+def checked_run_dir(run_dir: Path, identity: dict) -> Path:
+    """`run_dir`, made; one holding a checkpoint of another identity is refused with what differs."""
     last = run_dir / "checkpoints" / "last.pt"
     if last.is_file():
         stored = (load_checkpoint(last).get("config") or {}).get("identity")
@@ -50,7 +55,8 @@ def checked_run_dir(c: TrainConfig, identity: dict) -> Path:
 
 def _single_scene(c: TrainConfig):
     """(scene, identity's scene part, env_cfg -> (eval scenes, env_fn, bc_env_fn))."""
-    scene = prepared_scene(c.scene, c.navigation, demo_preset=c.demo_preset)
+    scene = prepared_scene(c.scene, c.navigation)
+    navmesh = load_navmesh(scene)
     if c.episodes.path is not None:
         scene, episodes_path = scene_episodes(scene, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
                                               generator=GeneratorSettings(goal_images=c.episodes.goal_images))
@@ -65,17 +71,9 @@ def _single_scene(c: TrainConfig):
         ppo_files.append(ppo_route_file(scene, episodes_path, num=c.episodes.ppo_routes, seed=c.episodes.ppo_routes_seed,
                                         base_seed=c.episodes.seed, goal_images=c.episodes.goal_images))
 
-    def envs(env_cfg):
-        parts = dict(navmesh=load_navmesh(scene), seed=c.seed, device=c.device,
-                     gaussians=scene_gaussians(scene, c.render.lod_px, needed=env_cfg.camera.enabled))
-        eval_env = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=c.eval.split,
-                                              batch_size=c.eval.batch_size, **parts), **goal)()  # built once, kept
-        train = partial(env_factory, scene, env_cfg=env_cfg, split=c.train_env.split,
-                        batch_size=c.train_env.batch_size, **parts)
-        bc_env_fn = GoalInputEnvFn(train(episodes_path), **goal)
-        env_fn = GoalInputEnvFn(train(ppo_files), **goal) if len(ppo_files) > 1 else bc_env_fn
-        return {scene.name: EvalScene(env=eval_env, episodes_path=episodes_path)}, env_fn, bc_env_fn
-
+    envs = partial(single_scene_envs, scene, episodes_path, ppo_files, navmesh=navmesh, lod_px=c.render.lod_px,
+                   seed=c.seed, device=c.device, eval_split=c.eval.split, eval_batch_size=c.eval.batch_size,
+                   train_split=c.train_env.split, train_batch_size=c.train_env.batch_size, goal=goal)
     return scene, scene_identity(scene.root, episodes_path), envs
 
 
@@ -91,38 +89,31 @@ def _scene_set(c: TrainConfig):
     scene = load_scene(paths[first])
     goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)
 
-    def envs(env_cfg):
-        kw = dict(device=c.device, lod_px=c.render.lod_px)
-        train_scene_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.train_env.split, **kw), **goal)
-        multi = partial(multi_scene_env_fn, list(paths), train_scene_env, batch_size=c.train_env.batch_size,
-                        num_active=c.scene.set.num_active, device=c.device,
-                        memory_budget_gb=c.scene.set.memory_budget_gb, seed=c.seed)
-        env_fn = multi()
-        log.info("scene set: %d scenes, %d active at a time (BC and PPO)", len(paths), env_fn.keywords["num_active"])
-        eval_env = GoalInputEnvFn(scene_env_fn(paths, env_cfg, split=c.eval.split, **kw), **goal)
-        scenes = {sid: EvalScene(make=partial(eval_env, sid, c.eval.batch_size, c.seed)) for sid in paths}
-        return scenes, env_fn, multi(global_episodes=True)
-
+    envs = partial(scene_set_envs, paths, device=c.device, lod_px=c.render.lod_px, seed=c.seed,
+                   eval_split=c.eval.split, eval_batch_size=c.eval.batch_size, train_split=c.train_env.split,
+                   train_batch_size=c.train_env.batch_size, num_active=c.scene.set.num_active,
+                   memory_budget_gb=c.scene.set.memory_budget_gb, goal=goal)
     return scene, scene_set_identity(paths), envs
 
 
 def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     """(Recipe, scene: the single scene, or a set's first). `config`: the resolved config as a plain dict
-    (stored in checkpoints)."""
+    (stored in checkpoints). Read top-down: this module's own reading of the config, the scene prepared (down
+    into the libraries), then `compose.build` shapes the env to the policy and builds the logger and the envs."""
     torch.manual_seed(c.seed)
     if c.threads:
         torch.set_num_threads(c.threads)
     check_policy_config(c.policy)  # a policy.* typo fails here, before any scene work
+    ray = ray_options(c.collector)
     scene, scene_part, envs = _scene_set(c) if c.scene.set else _single_scene(c)
     identity = run_identity(config, scene_part)
-    run_dir = checked_run_dir(c, identity)
+    run_dir = checked_run_dir(Path(c.run_dir) if c.run_dir else default_run_dir(c, identity), identity)
     policy = make_policy_from_config(c.policy, c.device)
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size)
-    env_cfg = dataclasses.replace(env_cfg, camera=dataclasses.replace(env_cfg.camera, render_backend=c.render.backend))
+    logger = make_logger(c.logger, run_dir, scene)
     t = time.perf_counter()
     eval_scenes, env_fn, bc_env_fn = envs(env_cfg)
     log.info("eval env built in %.1fs", time.perf_counter() - t)
-    logger = make_logger(c.logger, run_dir, scene)
     evaluator = Evaluator(eval_scenes, per_scene=bool(c.scene.set), num_episodes=c.eval.episodes, seed=c.seed,
                           deterministic=c.eval.deterministic, progress=c.progress, rollouts=c.save_rollouts,
                           logger=logger)
@@ -139,7 +130,7 @@ def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, object]:
     recipe = Recipe(policy=policy, evaluator=evaluator, env_fn=env_fn, bc_env_fn=bc_env_fn,
                     nav_from_scene=scene.nav_from_scene, bc=bc, ppo=c.algo.ppo if c.algo.ppo.enabled else None,
                     logger=logger, run_dir=run_dir, config=config, card=policy_card(config, policy), identity=identity,
-                    seed=c.seed, num_workers=c.collector.num_workers, ray=c.collector.ray_options(),
+                    seed=c.seed, num_workers=c.collector.num_workers, ray=ray,
                     progress=c.progress, first_row=first, kinematics=env_cfg.kinematics,
                     sampled_rows=c.eval.sampled_rows, blank_camera_rows=c.eval.blank_camera_rows)
     return recipe, scene

@@ -47,6 +47,7 @@ from .damage import fragment_mask, hole_mask, horizontal_xy
 from .lidar_only import write_lidar_only
 from .poses import PoseCorrection, pose_correction
 from .spec import DegradeSpec
+from .splat_points import splat_depth_points
 
 log = logging.getLogger(__name__)
 
@@ -186,7 +187,6 @@ def build_degraded_scene(src, out, spec: DegradeSpec, *, up_axis: str | None = N
     if spec.geometry == "splats":
         if scene.gaussians_path is None:
             raise ValueError(f"{src}: geometry='splats' needs 3dgs.ply, which this scene lacks")
-        from .splat_points import splat_depth_points
 
         xyz, rgb = splat_depth_points(Gaussians.load(scene.gaussians_path), scene.cameras,
                                       size=spec.splat_render_size, min_alpha=spec.splat_min_alpha, device=device)

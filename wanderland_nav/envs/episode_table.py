@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 import torch
+from PIL import Image
 
 MAX_START_SNAP = 1.0  # metres an episode start may lie off the navmesh before it is rejected
 
@@ -101,7 +102,6 @@ def load_goal_images(episodes: Sequence, roots: Sequence[Path], height: int, wid
     -> (images uint8 `[E, H, W, 3]` resized to the camera resolution, has bool `[E]`). Episodes
     without the field get zeros and False; a named file that is missing or unreadable is an error.
     """
-    from PIL import Image
 
     E = len(episodes)
     images = torch.zeros(E, height, width, 3, dtype=torch.uint8)

@@ -53,9 +53,11 @@ from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
+from wanderland_nav.envs.experts import ExpertPolicy
 from wanderland_nav.envs.pedestrians.component import make_pedestrians
 from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES, EpisodeMetrics, spl
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
+from wanderland_nav.render import render
 
 log = logging.getLogger(__name__)
 
@@ -155,8 +157,7 @@ class NavEnv(EnvBase):
             if gaussians is None:
                 raise ValueError(f"NavEnv({getattr(scene, 'name', 'scene')}): camera.enabled needs `gaussians` "
                                  "(load them with wanderland_nav.compose, or set camera.enabled=false)")
-            if renderer is None:
-                from wanderland_nav.render import render as renderer
+            renderer = render if renderer is None else renderer
         self._R_ns = torch.as_tensor(np.asarray(scene.nav_from_scene), dtype=torch.float32)  # nav_from_scene [3, 3]
         cfg = self.config
         self.table = build_episode_table(
@@ -192,8 +193,6 @@ class NavEnv(EnvBase):
         self.shortest_length = self._shortest_lengths(where)  # [E] exact geodesic start -> goal
         self.expert = None
         if cfg.expert_action:  # stateful (progress along each agent's path), driven by the env's own state
-            from wanderland_nav.envs.experts import ExpertPolicy
-
             self.expert = ExpertPolicy(self)
         self._make_specs()
         self._init_state()

@@ -43,6 +43,7 @@ from wanderland_nav.episodes.ownership import (GENERATOR_NAME, WRITTEN_DIGEST, _
 from wanderland_nav.episodes.ownership import OUR_GENERATOR_NAMES, generated_sibling  # noqa: F401  (their old home)
 from wanderland_nav.geometry import wrap_angle
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
+import shutil
 
 log = logging.getLogger(__name__)
 
@@ -471,7 +472,6 @@ def _image_set(out: Path) -> Path | None:
 
 def _drop_unused_image_set(out: Path, folder: Path | None, *, keep: Path) -> None:
     """Remove the views an earlier version of `out` used, unless another episodes file beside it names them."""
-    import shutil
 
     if folder is None or folder == keep or not folder.is_dir() or folder.parent.parent != out.parent:
         return

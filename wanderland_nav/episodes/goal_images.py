@@ -17,6 +17,9 @@ import torch
 from wanderland_nav.atomic import atomic_path
 from wanderland_nav.geometry import agent_camera_poses, frustum_mask, invert_rigid, pinhole_intrinsics
 from wanderland_nav.render.lod import DEFAULT_LOD_PX
+from PIL import Image
+from wanderland_nav.render import Gaussians, render
+from wanderland_nav.render.lod import load_splat
 
 log = logging.getLogger(__name__)
 
@@ -42,10 +45,7 @@ def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np
     once, at the camera's level of detail `lod_px` (`render.lod`; None: every Gaussian, frustum-culled
     per batch), and rendered `batch` cameras at a time (memory grows with C * H * W).
     """
-    from PIL import Image
 
-    from wanderland_nav.render import Gaussians, render
-    from wanderland_nav.render.lod import load_splat
 
     if len(out_paths) != len(goals_nav):
         raise ValueError(f"render_goal_images: {len(goals_nav)} goals but {len(out_paths)} output paths")

@@ -47,6 +47,7 @@ import numpy as np
 from wanderland_nav.atomic import atomic_write_bytes
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import nav_from_scene_rotation, parse_up_axis
+from wanderland_nav.geometry import up_vector
 
 #: The fields this schema owns, in the order they are written. Everything else is an extra.
 CORE_FIELDS = (
@@ -332,7 +333,6 @@ def rotation_from_yaw(yaw_nav, up_axis: str) -> np.ndarray:
     The rotation by `yaw` about nav +z is `R_sn Rz R_ns` in the scene frame, i.e. a rotation by
     `yaw` about the scene's up vector, so the quaternion is `(cos(yaw/2), sin(yaw/2) * up)`.
     """
-    from wanderland_nav.geometry import up_vector
 
     yaw = np.asarray(yaw_nav, dtype=np.float64)
     up = up_vector(up_axis)

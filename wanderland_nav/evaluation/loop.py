@@ -19,6 +19,7 @@ import torch
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
 from wanderland_nav.evaluation.metrics import EpisodeMetrics, aggregate_metrics
 from wanderland_nav.evaluation.tables import comparison_table
+from tqdm import tqdm
 
 
 @dataclass
@@ -53,7 +54,6 @@ def run_evaluation(env, policy, num_episodes: int | None = None, *, seed: int = 
     got: dict[int, EpisodeMetrics] = {}
     bar = None
     if progress:
-        from tqdm import tqdm
 
         bar = tqdm(total=n, desc=f"eval {name}", unit="ep")
     try:

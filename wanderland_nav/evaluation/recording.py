@@ -14,8 +14,11 @@ import torch
 
 from wanderland_nav import keys
 from wanderland_nav.evaluation.loop import run_evaluation
+from wanderland_nav.envs.camera import AgentCamera
+from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.envs.experts import waypoints_along_samples
 from wanderland_nav.evaluation.rollouts import _FIELDS, Rollout, RolloutMeta, save_rollout
+from wanderland_nav.render import render
 
 
 class RolloutRecorder:
@@ -178,11 +181,7 @@ def render_rollout_frames(meta: RolloutMeta, gaussians, *, device: str = "cpu", 
     """A frame source `(position_nav [N, 3], yaw [N]) -> (rgb u8 [N, H, W, 3], depth [N, H, W, 1] | None)`
     that renders the agent camera exactly as the env did (same `CameraConfig`, intrinsics, pose formula),
     batched `render_chunk` cameras per renderer call. Replay uses it when a file has no frames."""
-    from wanderland_nav.envs.camera import AgentCamera
-    from wanderland_nav.envs.config import CameraConfig
-
-    if renderer is None:
-        from wanderland_nav.render import render as renderer
+    renderer = render if renderer is None else renderer
     known = {f for f in CameraConfig.__dataclass_fields__}
     cfg = CameraConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in meta.camera.items() if k in known})
     cfg.enabled = True

@@ -6,7 +6,7 @@ millisecond. `fused_kernel.cpp` does per view what `render()` does (the hierarch
 the EWA projection and culls of `packed.py` / `projection.py`, SH colours, 4x4 tile lists with the exact tile
 test of `binning.py`, the front-to-back composite of `rasterize.py`, the background and depth channels of
 `api.py`) without per-pair tensors, cameras spread over threads. No gradients: the pure-torch renderer
-stays the differentiable reference (`render.backend=torch`), and the tests hold this one to it.
+stays the differentiable reference (`env.camera.render_backend=torch`), and the tests hold this one to it.
 
 Build: at first use `g++` (or `$CXX`) compiles the source into `kernels/` of the project's cache folder
 (`wanderland_nav.cache.cache_root`) under a name keyed by the source, the flags, the compiler and the CPU kind, so it is

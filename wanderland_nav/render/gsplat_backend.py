@@ -1,4 +1,4 @@
-"""Optional gsplat backend (`render.backend=gsplat`): the CUDA kernels behind the same call.
+"""Optional gsplat backend (`env.camera.render_backend=gsplat`): the CUDA kernels behind the same call.
 
 Why an adapter and not a second renderer: `api.rasterization` already has gsplat 1.5's signature
 and return layout, so the only work is dropping this package's pure-PyTorch scheduling knobs and

@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.geometry import rotmat_to_quat
 
 from .gaussians import Gaussians
 from .packed import RADIUS_SIGMAS
@@ -162,7 +163,7 @@ class GaussianHierarchy:
         means, covars, opac, sh = self.gather(ids)
         ev, vec = torch.linalg.eigh(covars.double())  # ascending eigenvalues, orthonormal columns
         vec[..., 2] *= torch.linalg.det(vec).sign()[:, None]  # a proper rotation
-        quats = _rotation_to_quat(vec).to(means.dtype)
+        quats = rotmat_to_quat(vec).to(means.dtype)
         log_scales = (0.5 * torch.log(ev.clamp_min(1e-30))).to(means.dtype)
         logits = torch.logit(opac.clamp(1e-7, 1 - 1e-7))
         return Gaussians(means, log_scales, quats, logits, sh[:, 0].contiguous(), sh[:, 1:].contiguous())
@@ -233,22 +234,6 @@ def _camera_table(viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: 
     C = viewmats.shape[0]
     return torch.cat([viewmats[:, :3, :3].reshape(C, 9).t(), viewmats[:, :3, 3].t(), torch.maximum(fx, fy)[None],
                       sign * inv, tans * inv]).contiguous()
-
-
-def _rotation_to_quat(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices `[M, 3, 3]` -> unit wxyz quaternions `[M, 4]` (the largest of the four
-    candidate denominators per matrix, so no division by a small number)."""
-    m = R.reshape(-1, 9).unbind(-1)
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = m
-    cand = torch.stack([
-        torch.stack([1 + r00 + r11 + r22, r21 - r12, r02 - r20, r10 - r01], -1),
-        torch.stack([r21 - r12, 1 + r00 - r11 - r22, r01 + r10, r02 + r20], -1),
-        torch.stack([r02 - r20, r01 + r10, 1 - r00 + r11 - r22, r12 + r21], -1),
-        torch.stack([r10 - r01, r02 + r20, r12 + r21, 1 - r00 - r11 + r22], -1),
-    ], 1)  # [M, 4, 4]: row k is 4 q_k q (unnormalised)
-    best = torch.stack([cand[:, k, k] for k in range(4)], -1).argmax(-1)
-    q = cand[torch.arange(R.shape[0]), best]
-    return torch.nn.functional.normalize(q, dim=-1)
 
 
 # ---- building ------------------------------------------------------------------------------------

@@ -17,19 +17,15 @@ from dataclasses import dataclass
 
 import torch
 
+from wanderland_nav.geometry import quat_to_rotmat
+
 ALPHA_THRESHOLD = 1.0 / 255.0
 CAMERA_MODELS = ("pinhole", "fisheye", "ortho")
 
 
 def quat_scale_to_covar(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     """World covariances `[N, 3, 3]` = R S S R^T from wxyz quats `[N, 4]` (normalised here) and scales `[N, 3]`."""
-    w, x, y, z = torch.nn.functional.normalize(quats, dim=-1).unbind(-1)
-    R = torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(quats.shape[:-1] + (3, 3))
-    M = R * scales[..., None, :]  # R @ diag(s)
+    M = quat_to_rotmat(quats) * scales[..., None, :]  # R @ diag(s)
     return M @ M.transpose(-1, -2)
 
 

@@ -112,13 +112,13 @@ class BCConfig:
 
     rounds: int = 4                # 1 expert round + (rounds - 1) DAgger rounds
     env_steps_per_round: int = 60  # env.step calls per round (each gives batch_size samples)
-    updates_per_round: int = 400
-    batch_size: int = 32
-    lr: float = 3e-4
-    weight_decay: float = 1e-4
+    updates_per_round: int = 400  # gradient steps on the aggregated dataset per round
+    batch_size: int = 32  # samples per gradient step
+    lr: float = 3e-4  # AdamW learning rate
+    weight_decay: float = 1e-4  # AdamW weight decay
     expert_noise: float = 0.3      # metres of waypoint noise in the expert round
     dagger_beta: float = 0.5       # expert share in DAgger rounds (decays by half each round)
-    max_grad_norm: float = 1.0
+    max_grad_norm: float = 1.0  # gradient-norm clip
     heldout_every: int = 10        # episodes with index % this == 0 are held out: their loss is reported, not fitted
     cosine_lr: bool = True         # cosine decay of lr to lr / 10 over all rounds' updates (fits to convergence)
 

@@ -58,25 +58,25 @@ IS_WEIGHT = "importance_weight"
 
 @dataclass
 class PPOConfig:
-    """PPO sizes and rates; the defaults are the main job's (`conf/algo/ppo.yaml`, equal by
-    tests/test_config_defaults.py)."""
+    """PPO sizes and rates; the defaults are the main job's (the home of each: `conf/algo/ppo.yaml` holds only what
+    differs, checked by tests/test_config_defaults.py)."""
 
     total_frames: int = 44_800         # env steps summed over the batch (the main job's 56 iterations)
     frames_per_batch: int = 800        # per collector iteration (8 agents x 100 steps)
-    epochs: int = 4
-    minibatch_size: int = 200
+    epochs: int = 4  # passes over each batch
+    minibatch_size: int = 200  # samples per gradient step
     lr: float = 5e-5                   # policy (actor) learning rate
     critic_lr: float = 1e-3            # value head: a fresh critic must catch up with a pretrained actor
     gamma: float = 0.99                # the paper's
-    lmbda: float = 0.95
-    clip_epsilon: float = 0.2
-    entropy_coeff: float = 0.0
-    max_grad_norm: float = 0.5
-    normalize_advantage: bool = True
+    lmbda: float = 0.95  # GAE lambda
+    clip_epsilon: float = 0.2  # PPO's ratio clip
+    entropy_coeff: float = 0.0  # entropy bonus weight
+    max_grad_norm: float = 0.5  # gradient-norm clip
+    normalize_advantage: bool = True  # advantages standardised per minibatch
     target_kl: float | None = 0.05     # stop the epochs of one batch early beyond this approx KL
     critic_warmup_iters: int = 2       # first iterations update only the critic (see PPOTrainer.update)
     critic_epochs: int = 8             # passes of the critic over each batch (cached inputs: cheap)
-    critic_hidden: int = 256
+    critic_hidden: int = 256  # width of the critic's MLP
     critic_horizon: float = 100.0      # the critic's clock input is step_count / this (a scale, not a limit)
     anneal_lr: bool = True             # actor lr: linear to 0 over total_frames
     init_std: float | None = None      # exploration std (m) PPO starts from; None: the policy's own (BC keeps

@@ -28,6 +28,7 @@ from torchrl.modules import ProbabilisticActor
 
 from policies import WaypointNormal
 from wanderland_nav import keys as K
+from torch._C import _functorch as ft
 
 
 class _LocScale(TensorDictModuleBase):
@@ -63,7 +64,6 @@ def _unvmapped(fn, td: TensorDictBase) -> torch.Tensor:
     """`fn(td) -> [*B, D]` run on plain tensors: each `torch.vmap` level over `td` is unwrapped into a real
     leading dimension (`[V, *B]`; the policy takes any leading batch dims), and the result wrapped back.
     Same arithmetic as vmap's, one batched call, and GroupNorm never sees a batched tensor."""
-    from torch._C import _functorch as ft
 
     leaves = list(td.values(True, True))
     if not leaves or not ft.is_batchedtensor(leaves[0]):

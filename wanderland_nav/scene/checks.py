@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from wanderland_nav.errors import WanderlandInputError
 from wanderland_nav.geometry import parse_up_axis
+import torch
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +124,6 @@ def splat_visibility(gaussians, cameras, *, sample: int = 50_000, max_cameras: i
     image (its 3-sigma footprint overlapping it) and at least `min_px` pixels across. -> counts of the sample:
     `sampled`, `nonfinite`, `transparent`, `unseen` (finite and opaque but in no view or too small), `visible`,
     and `cameras` used (0: the scene has none, and only finiteness and opacity are checked)."""
-    import torch
 
     n = len(gaussians)
     idx = torch.from_numpy(np.sort(np.random.default_rng(seed).choice(n, min(n, sample), replace=False)))

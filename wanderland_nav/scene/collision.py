@@ -59,20 +59,20 @@ class CollisionSettings:
     """Parameters of `extract_collision_mesh` (metres). Hashable: the pipeline stores them beside
     the mesh to decide whether it is up to date."""
 
-    voxel_size: float = 0.15
+    voxel_size: float = 0.15  # m: the occupancy grid's voxel edge
     crop_radius: float = 15.0  # horizontal distance to the nearest capture position
     height_band: tuple[float, float] = (-4.0, 4.0)  # along up, relative to that position's height
-    min_component_faces: int = 50
+    min_component_faces: int = 50  # smaller connected components are dropped as flying noise
     # Upward faces more than this far above the nearest capture position are the hidden back sides
     # of ceilings, roofs and canopies seen from below (marching cubes closes every scanned layer
     # into a slab); dropped so they cannot become phantom walkable islands. None = keep them.
-    drop_tops_above_capture: float | None = 0.5
-    min_points_per_voxel: int = 1
+    drop_tops_above_capture: float | None = 0.5  # m: upward faces this far above the capture are hidden tops, dropped (null: keep)
+    min_points_per_voxel: int = 1  # LiDAR hits a voxel needs to be occupied
     close_iterations: int = 1  # binary closing (6-connected) to bridge scan-line gaps; 0 = off
     # Ground step (`scene.ground.fit_ground`): the ground becomes a sheet at its measured height (not voxel
     # tops), and ground columns LiDAR missed (the blind spot under the sensor, the gaps between sparse rings)
     # are filled where observed ground bounds them on all sides. False: voxel slabs everywhere, no fill.
-    ground_fill: bool = True
+    ground_fill: bool = True  # ground as a sheet at its measured height, filling what LiDAR missed
     ground_max_gap: float = 10.0  # longest span (m) bridged between observed ground columns
     ground_window: float = 3.0  # neighbourhood (m) whose lowest voxel defines "ground"
     ground_max_rise: float = 0.3  # a column is ground within this of that lowest voxel (m)
@@ -80,7 +80,7 @@ class CollisionSettings:
     ground_bridge: float = 6.0  # fills may span connected obstacles up to this long (a parked car), not walls
     # v2 scenes ship `scene.ply` (a TSDF mesh): use it as the collision mesh (cropped like the points)
     # instead of re-extracting one from the LiDAR. False: always extract from the points.
-    use_scene_mesh: bool = False
+    use_scene_mesh: bool = False  # v2: the shipped scene.ply as the collision mesh instead of the LiDAR
     slab_voxels: int = 96  # marching-cubes slab thickness along nav x (memory bound)
     chunk_points: int = 1_000_000  # points processed per batch (memory bound)
 

@@ -11,8 +11,10 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
 from wanderland_nav.errors import WanderlandInputError
+from wanderland_nav.geometry import quat_to_rotmat, rotmat_to_quat
 
 log = logging.getLogger("wanderland_nav.scene.colmap")
 
@@ -171,32 +173,18 @@ class ColmapPoints3D:
 
 
 def qvec_to_rotmat(q) -> np.ndarray:
-    """wxyz quaternion `[4]` (normalised here) -> rotation `[3,3]` float64."""
+    """A COLMAP wxyz quaternion `[4]` (normalised; a non-finite or zero one is refused) -> rotation `[3,3]` float64,
+    by `geometry.quat_to_rotmat`."""
     q = np.asarray(q, dtype=np.float64)
     n = np.linalg.norm(q)
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError(f"quaternion {q.tolist()} is not finite / has zero norm")
-    w, x, y, z = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return quat_to_rotmat(torch.from_numpy(q)).numpy()
 
 
 def rotmat_to_qvec(R) -> np.ndarray:
-    """Rotation `[3,3]` -> unit wxyz quaternion `[4]` with w >= 0 (Shepperd's largest-diagonal branch)."""
-    m = np.asarray(R, dtype=np.float64)
-    tr = np.trace(m)
-    cands = np.array([
-        [1 + tr, m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]],
-        [m[2, 1] - m[1, 2], 1 + m[0, 0] - m[1, 1] - m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0]],
-        [m[0, 2] - m[2, 0], m[0, 1] + m[1, 0], 1 - m[0, 0] + m[1, 1] - m[2, 2], m[1, 2] + m[2, 1]],
-        [m[1, 0] - m[0, 1], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1], 1 - m[0, 0] - m[1, 1] + m[2, 2]],
-    ])
-    q = cands[int(np.argmax([tr, m[0, 0], m[1, 1], m[2, 2]]))]
-    q = q / np.linalg.norm(q)
-    return -q if q[0] < 0 else q
+    """Rotation `[3,3]` -> COLMAP's unit wxyz quaternion `[4]` with w >= 0, by `geometry.rotmat_to_quat`."""
+    return rotmat_to_quat(torch.as_tensor(np.asarray(R, dtype=np.float64))).numpy()
 
 
 @dataclass

@@ -7,6 +7,8 @@
 from __future__ import annotations
 
 from pathlib import Path
+from wanderland_nav.scene.demo import make_demo_scene
+from wanderland_nav.scene.district import make_district
 
 GENERATORS = ("demo", "district")
 
@@ -15,11 +17,9 @@ def make_generated_scene(path, generator: str = "demo", seed: int = 0, preset: s
     """Build (or find up to date) the `generator`'s scene for `seed` at `preset` (the demo's preset, the
     district's size) in `path`."""
     if generator == "demo":
-        from wanderland_nav.scene.demo import make_demo_scene
 
         return make_demo_scene(path, seed=seed, preset=preset)
     if generator == "district":
-        from wanderland_nav.scene.district import make_district
 
         return make_district(path, seed=seed, size=preset)
     raise ValueError(f"scene generator must be one of {list(GENERATORS)}, got {generator!r}")

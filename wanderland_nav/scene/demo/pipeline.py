@@ -43,6 +43,7 @@ from wanderland_nav.scene.pointcloud import write_ply_points
 from . import capture, lidar, splats, views
 from .layout import Layout
 from .raycast import RayCaster
+from . import textures
 from .textures import MATERIALS
 
 UP_AXIS = "-y"
@@ -229,7 +230,6 @@ def _write_splats(path: Path, sp: "splats.SplatSet", S: np.ndarray, sh_degree: i
 
 def _write_gt_mesh(path: Path, layout: Layout, S: np.ndarray) -> None:
     """Ground-truth mesh (evaluation only), scene frame, face colours = mean albedo of each material."""
-    from . import textures
 
     probe = np.linspace(0.0, 40.0, 257)
     pts = np.stack([probe, probe * 0.37, np.full_like(probe, 1.0)], -1)

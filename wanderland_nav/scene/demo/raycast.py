@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import trimesh
 
 log = logging.getLogger(__name__)
 _CHUNK = 1 << 20
@@ -44,7 +45,6 @@ class RayCaster:
         self._embree = None
         if backend in ("auto", "embree"):
             try:
-                import trimesh
                 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
                 mesh = trimesh.Trimesh(self.vertices, self.faces, process=False)

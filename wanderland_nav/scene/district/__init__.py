@@ -25,6 +25,7 @@ from wanderland_nav.cache import json_digest
 
 from ..demo.pipeline import UP_AXIS, DemoPreset, build_in_place, write_capture
 from .layout import District, build_district
+import time
 
 GENERATOR_VERSION = 1
 MARKER = ".district_scene.json"
@@ -73,7 +74,6 @@ def make_district(out_dir, seed: int = 0, size: str = "small", *, timings: dict 
 
 
 def _build(root: Path, seed: int, size: str, key: str, timings: dict) -> None:
-    import time
 
     t = time.perf_counter()
     d = build_district(seed)
