@@ -141,3 +141,24 @@ def test_people_tables_pair_each_count_with_no_people_and_rl_with_bc(tmp_path):
     assert "-0.300" in row  # SR 0.7 - 1.0 over the same episodes
     social = text.split("social metrics with people")[1]
     assert "min_time_to_collision" in social and "intimate_seconds" in social and "BC @0" not in social
+
+
+@pytest.mark.slow
+def test_the_paper_study_at_smoke_size_runs_every_part_and_resumes(tmp_path, monkeypatch):
+    """`python -m wanderland_nav.study +study=paper debug=smoke` from an empty folder (~90 s on 2 cores), then again."""
+    from wanderland_nav.study import run
+
+    monkeypatch.chdir(tmp_path)  # the scenes are built under ./data, as from a fresh checkout
+    overrides = ["+study=paper", "debug=smoke", f"out={tmp_path / 'out'}"]
+    written = run(compose_config("study", overrides))
+    manifest = json.loads((tmp_path / "out" / MANIFEST).read_text())
+    assert {e["status"] for e in manifest.values()} == {"done"} and len(manifest) == 33
+    assert "BC+RL - BC" in written["main_job"].read_text()
+    people = written["pedestrians"].read_text()
+    assert "BC @30 - BC @0" in people and "min_time_to_collision" in people and "3 of 3 cells done" in people
+    assert "imagegoal/nomad_imagegoal_rl_bc" in written["task_families"].read_text()
+    assert "misranking test" in written["table"].read_text()
+    again = run(compose_config("study", overrides))
+    assert json.loads((tmp_path / "out" / MANIFEST).read_text()) == manifest  # nothing ran again
+    for part in ("main_job", "pedestrians", "task_families"):
+        assert again[part].read_text().split("\n", 1)[1] == written[part].read_text().split("\n", 1)[1]
