@@ -142,20 +142,34 @@ EPISODE_KEYS = (EPISODE_SUCCESS, EPISODE_SPL, EPISODE_NAVIGATION_ERROR, EPISODE_
 EPISODE_PERSON_COLLISIONS = (EPISODE, "person_collisions")
 """int64 `[1]`: steps in which a pedestrian touched the agent (`env.pedestrians`; `EpisodeMetrics` has the same)."""
 
-EPISODE_NEAR_05_SECONDS = (EPISODE, "near_05_seconds")
-"""float32 `[1]`: seconds with a pedestrian within 0.5 m (centre distance)."""
+EPISODE_INTIMATE_SECONDS = (EPISODE, "intimate_seconds")
+"""float32 `[1]`: seconds with the nearest pedestrian in the intimate zone, [0, 0.45) m from the agent's edge."""
 
-EPISODE_NEAR_10_SECONDS = (EPISODE, "near_10_seconds")
-"""float32 `[1]`: seconds with a pedestrian within 1.0 m."""
+EPISODE_PERSONAL_SECONDS = (EPISODE, "personal_seconds")
+"""float32 `[1]`: seconds with the nearest pedestrian in the personal zone, [0.45, 1.2) m from the agent's edge."""
+
+EPISODE_SOCIAL_SECONDS = (EPISODE, "social_seconds")
+"""float32 `[1]`: seconds with the nearest pedestrian in the social zone, [1.2, 3.6) m from the agent's edge."""
 
 EPISODE_MIN_PERSON_DISTANCE = (EPISODE, "min_person_distance")
 """float32 `[1]`: the closest centre distance to any pedestrian so far, metres (inf before the first step)."""
 
+EPISODE_MIN_TIME_TO_COLLISION = (EPISODE, "min_time_to_collision")
+"""float32 `[1]`: the smallest constant-velocity time-to-collision with any pedestrian so far, seconds (capped at
+`evaluation.social.TTC_HORIZON`)."""
+
+EPISODE_STALLED_SECONDS = (EPISODE, "stalled_seconds")
+"""float32 `[1]`: seconds in which the agent neither moved nor turned."""
+
 EPISODE_PATH_IRREGULARITY = (EPISODE, "path_irregularity")
 """float32 `[1]`: total absolute heading change per metre of max(path, shortest) length, rad/m."""
 
-EPISODE_SOCIAL_KEYS = (EPISODE_PERSON_COLLISIONS, EPISODE_NEAR_05_SECONDS, EPISODE_NEAR_10_SECONDS,
-                       EPISODE_MIN_PERSON_DISTANCE, EPISODE_PATH_IRREGULARITY)
+EPISODE_JERK = (EPISODE, "jerk")
+"""float32 `[1]`: mean magnitude of the agent's horizontal jerk per step, m/s^3."""
+
+EPISODE_SOCIAL_KEYS = (EPISODE_PERSON_COLLISIONS, EPISODE_INTIMATE_SECONDS, EPISODE_PERSONAL_SECONDS,
+                       EPISODE_SOCIAL_SECONDS, EPISODE_MIN_PERSON_DISTANCE, EPISODE_MIN_TIME_TO_COLLISION,
+                       EPISODE_STALLED_SECONDS, EPISODE_PATH_IRREGULARITY, EPISODE_JERK)
 """The `(EPISODE, name)` keys the env adds with pedestrians on (`env.pedestrians.count > 0`)."""
 
 # --------------------------------------------------------------------------- actions

@@ -158,13 +158,14 @@ def test_a_person_on_the_robot_is_an_intervention_with_its_own_cause(demo):
     (m0, m1) = sorted(env.pop_finished_metrics(), key=lambda m: m.serial)
     for m in (m0, m1):
         assert m.intervention and m.intervention_cause == "pedestrian" and m.person_collisions == 1
-        assert m.min_person_distance < 0.6 and m.near_05_seconds == 0.5 and m.pedestrians == 3
+        assert m.min_person_distance < 0.6 and m.intimate_seconds == 0.5 and m.pedestrians == 3
+        assert m.min_time_to_collision == 0.0 and m.personal_seconds == m.social_seconds == 0.0
+        assert m.stalled_seconds == 0.5 and m.jerk == 0.0  # the zero action: it stood still from rest
     assert td[keys.EPISODE_PERSON_COLLISIONS].flatten().tolist() == [1, 1]  # the TorchRL view, at done
-    assert td[keys.EPISODE_NEAR_05_SECONDS].flatten().tolist() == [0.5, 0.5]
-    np.testing.assert_allclose(td[keys.EPISODE_MIN_PERSON_DISTANCE].flatten().numpy(),
-                               [m0.min_person_distance, m1.min_person_distance], rtol=1e-6)
-    np.testing.assert_allclose(td[keys.EPISODE_PATH_IRREGULARITY].flatten().numpy(),
-                               [m0.path_irregularity, m1.path_irregularity], rtol=1e-5)
+    assert td[keys.EPISODE_INTIMATE_SECONDS].flatten().tolist() == [0.5, 0.5]
+    for key in keys.EPISODE_SOCIAL_KEYS:  # the TorchRL view and the records agree on every social metric
+        np.testing.assert_allclose(td[key].flatten().numpy(), [getattr(m0, key[1]), getattr(m1, key[1])],
+                                   rtol=1e-5, err_msg=key[1])
     from wanderland_nav.evaluation.tables import comparison_table
 
     table = comparison_table({"x": [m0.to_dict(), m1.to_dict()]})

@@ -26,6 +26,38 @@ def is_policy_phase(phase: str, *, trained: bool = False) -> bool:
 PROTOCOLS = ("own", "grounded_routes")
 
 
+#: the parts a study config may run (`study.parts`): the grounding grid above (Table 3, Fig. 8 and the misranking
+#: test), the main job over `seeds`, the pedestrian study over its policies, the task families (the benchmark)
+PARTS = ("main_job", "pedestrians", "grounding", "task_families")
+
+
+@dataclass
+class MainJobPart:
+    """`study.main_job`: the main job (`train` with these overrides), one cell per seed of `study.seeds`."""
+
+    train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])
+
+
+@dataclass
+class PedestrianPart:
+    """`study.pedestrians`: the main job's BC and BC+RL of every seed evaluated among `counts` people each."""
+
+    counts: List[int] = field(default_factory=lambda: [0, 10, 30])
+    evaluate: List[str] = field(default_factory=lambda: ["scene.preset=tiny", "split=test", "num_episodes=null",
+                                                         "batch_size=25"])
+
+
+@dataclass
+class TaskFamilyPart:
+    """`study.task_families`: per seed, one `train` run per experiment (the point-goal one is the main job's) and
+    one benchmark over their BC checkpoints (the tasks each fits)."""
+
+    exps: List[str] = field(default_factory=lambda: ["nomad_imagegoal_rl", "instruction_rl"])
+    train: List[str] = field(default_factory=lambda: ["algo.ppo.enabled=false"])  # the table compares BC phases
+    benchmark: List[str] = field(default_factory=lambda: ["scene.preset=tiny", "split=test", "num_episodes=null",
+                                                          "pointgoal_input=route", "batch_size=25", "baseline=random"])
+
+
 @dataclass
 class StudyGroup:
     """`conf/study/<name>.yaml`: the grid and its sizes."""
@@ -62,6 +94,13 @@ class StudyGroup:
     # `episodes.sampler.SamplerSettings` overrides for every environment's episodes (e.g. camera_radius on a LiDAR
     # street whose capture path is a few metres long); {}: the recipe's own episodes file, as `train` makes it
     episode_sampler: Dict[str, Any] = field(default_factory=dict)
+    parts: List[str] = field(default_factory=lambda: ["grounding"])  # which of `PARTS` run, in this order
+    main_job: MainJobPart = field(default_factory=MainJobPart)
+    pedestrians: PedestrianPart = field(default_factory=PedestrianPart)
+    task_families: TaskFamilyPart = field(default_factory=TaskFamilyPart)
+    # appended to every main-job, pedestrian and task-family cell's command (debug=smoke: `debug=smoke`, so each
+    # runs at its entry point's smoke size)
+    part_overrides: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -83,3 +122,7 @@ class StudyConfig:
     report_only: bool = False  # write table.txt / fig8.png / meshes.rrd from the cells done so far; run none
     device: str = "cpu"
     study_debug: Optional[Dict[str, Any]] = None  # debug=smoke sizes, merged over `study` (`study_config`)
+    # a Ray cluster's address ("auto", "ray://host:10001", or "local": start one on this machine): cells whose needs
+    # are done run as Ray tasks side by side, `ray_cpus_per_cell` CPUs each; null: one cell after another here
+    ray: Optional[str] = None
+    ray_cpus_per_cell: int = 1

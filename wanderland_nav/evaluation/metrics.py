@@ -25,6 +25,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
 
+from wanderland_nav.evaluation.social import METRICS as SOCIAL
+
 #: why an intervention ended an episode; `intervention_cause` codes 1, 2, 3 (0: none). When several rules
 #: fire on the same step the first listed wins: leaving the navmesh is the most specific, then stuck (blocked and
 #: motionless for `stuck_steps`), then no progress (the catch-all: `no_progress_steps` without a new best distance).
@@ -58,30 +60,21 @@ class EpisodeMetrics:
     nonfinite_actions: int = 0  # steps with a NaN/inf action (the agent stood still)
     undefined_distance_steps: int = 0  # steps with no geodesic to the goal (NavEnv._step_distance's rule applied)
     intervention_cause: str = ""  # "" | "off_navmesh" | "stuck" | "no_progress" | "pedestrian": the rule that ended it
-    # social metrics, with pedestrians on (`social_metrics`); 0 people: the defaults below (None: not measured)
+    # social metrics, with pedestrians on (`evaluation.social` defines each); 0 people: the defaults below (None:
+    # not measured)
     pedestrians: int = 0  # people per env instance during the episode
     person_collisions: int = 0  # steps in which a person touched the robot (centres closer than the two radii)
-    near_05_seconds: float = 0.0  # seconds with a person within 0.5 m (a step counts its closest approach)
-    near_10_seconds: float = 0.0  # seconds with a person within 1.0 m
-    min_person_distance: float | None = None  # metres: the closest centre distance to any person (None: no people)
-    path_irregularity: float | None = None  # rad/m: total absolute heading change per metre (social_metrics)
+    intimate_seconds: float = 0.0  # seconds with the nearest person [0, 0.45) m from the robot's edge
+    personal_seconds: float = 0.0  # ... [0.45, 1.2) m
+    social_seconds: float = 0.0  # ... [1.2, 3.6) m
+    min_person_distance: float | None = None  # metres: the closest centre distance to any person
+    min_time_to_collision: float | None = None  # seconds, constant-velocity, capped at social.TTC_HORIZON
+    stalled_seconds: float | None = None  # seconds neither moving nor turning
+    path_irregularity: float | None = None  # rad/m: total absolute heading change per metre
+    jerk: float | None = None  # m/s^3: mean magnitude of the horizontal jerk per step
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def social_metrics(m: EpisodeMetrics, counters: dict, pedestrians: int, period: float) -> None:
-    """Fill `m`'s social fields from `crowd.SocialCounters` values of its episode (steps -> seconds at `period`).
-
-    Path irregularity is the robot's total absolute heading change per metre of max(travelled, geodesic start-goal
-    length) (rad/m; the larger length, as SPL's denominator, keeps an episode that barely moved finite; Guzzi
-    et al. 2013 count only the unnecessary part of the turning, this counts all of it)."""
-    m.pedestrians = pedestrians
-    m.person_collisions = int(counters["contacts"])
-    m.near_05_seconds = float(counters["near_05"]) * period
-    m.near_10_seconds = float(counters["near_10"]) * period
-    m.min_person_distance = float(counters["min_distance"])
-    m.path_irregularity = float(counters["turning"]) / max(m.path_length, m.shortest_length, 1e-6)
 
 
 def spl(success: bool, shortest: float, travelled: float) -> float:
@@ -134,9 +127,7 @@ def _summarise(eps: Sequence[EpisodeMetrics]) -> dict[str, float]:
         "collisions": mean(e.collisions for e in eps),
         "steps": mean(e.steps for e in eps),
         "nonfinite_actions": mean(e.nonfinite_actions for e in eps),
-        **({} if not any(e.pedestrians for e in eps) else
-           {k: mean(getattr(e, k) for e in eps) for k in ("person_collisions", "near_05_seconds", "near_10_seconds",
-                                                          "min_person_distance", "path_irregularity")}),
+        **({} if not any(e.pedestrians for e in eps) else {k: mean(getattr(e, k) for e in eps) for k in SOCIAL}),
     }
 
 

@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 import torch
 
 from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES
+from wanderland_nav.evaluation.social import LOWER_IS_BETTER as SOCIAL_LOWER_IS_BETTER, METRICS as SOCIAL_METRICS
 from wanderland_nav.evaluation.stats import Estimate, bootstrap_interval, paired_difference, rate_interval, seed_aggregate
 
 #: NE = Euclidean end-to-goal distance (the paper's), distance_to_goal = geodesic end-to-goal distance,
@@ -34,10 +35,9 @@ FIELDS = {"NE": "navigation_error", "SR": "success", "SPL": "spl", "IR": "interv
 #: IR split by the rule that ended the episode (`EpisodeMetrics.intervention_cause`); they sum to IR
 CAUSE_COLUMNS = {f"IR_{c}": c for c in INTERVENTION_CAUSES}
 FIELDS.update({c: "intervention_cause" for c in CAUSE_COLUMNS})
-#: with pedestrians on (records with `pedestrians > 0`), the tables add these (`evaluation.metrics.social_metrics`)
-SOCIAL_COLUMNS = ("person_collisions", "near_05_seconds", "near_10_seconds", "min_person_distance", "path_irregularity")
-LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS, "person_collisions", "near_05_seconds",
-                   "near_10_seconds", "path_irregularity"}
+#: with pedestrians on (records with `pedestrians > 0`), the tables add these (`evaluation.social` defines them)
+SOCIAL_COLUMNS = SOCIAL_METRICS
+LOWER_IS_BETTER = {"NE", "IR", "distance_to_goal", "collisions", *CAUSE_COLUMNS, *SOCIAL_LOWER_IS_BETTER}
 RATES = {"SR", "IR", *CAUSE_COLUMNS}
 #: suffix of a row evaluated with sampled actions (the stochastic policy) instead of the mean waypoints
 SAMPLED = " sampled"
@@ -162,8 +162,8 @@ def comparison_table(rows: Mapping[str, Sequence[Mapping]], baseline: str | None
     """One evaluation per row: `rows` name -> its per-episode records (`EvaluationResult.records`).
     columns: default `TABLE_COLUMNS`, plus `SOCIAL_COLUMNS` when every row was evaluated among pedestrians."""
     if columns is None:
-        social = rows and all(r and r[0].get("pedestrians", 0) > 0 for r in rows.values())
-        columns = TABLE_COLUMNS + (SOCIAL_COLUMNS if social else ())
+        among_people = rows and all(r and r[0].get("pedestrians", 0) > 0 for r in rows.values())
+        columns = TABLE_COLUMNS + (SOCIAL_COLUMNS if among_people else ())
     return seed_table({k: [v] for k, v in rows.items()}, baseline, columns, pairs=pairs)
 
 

@@ -137,9 +137,19 @@ def plan_cells(s: StudyGroup) -> list[Cell]:
     return cells
 
 
+#: the cells of the parts beside the grounding grid (`parts.py`): kind -> the part that plans them
+PART_KINDS = {"main": "main_job", "people": "pedestrians", "tasks": "task_families", "bench": "task_families"}
+
+
 def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
     """What a cell's result depends on besides the cells it needs (hashed into its folder name)."""
     s = c.study
+    if cell.kind in PART_KINDS:  # a part's cell is one entry-point command: its overrides are its inputs (the
+        # experiment, the people count and the seed are in its key; what it runs on, in the cells it needs)
+        own = {"main": {"train": s.main_job.train}, "people": {"evaluate": s.pedestrians.evaluate},
+               "tasks": {"train": s.task_families.train},
+               "bench": {"benchmark": s.task_families.benchmark, "exps": s.task_families.exps}}[cell.kind]
+        return {**{k: list(v) for k, v in own.items()}, "overrides": list(s.part_overrides), "device": c.device}
     source = {"path": c.source.path, "demo": c.source.demo, "seed": c.source.demo_seed, "preset": c.source.demo_preset}
     if cell.kind == "build":
         return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
@@ -174,10 +184,7 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
     manifest = Ledger(out / MANIFEST)
     for cell in cells:
         h = digests[cell.key]
-        status = manifest.status(cell.key, h)
-        if status == "done" or (status == "failed" and not c.study.retry_failed) or (
-                status == "running" and process_alive(manifest.entry(cell.key, h).get("pid"))):
-            log.info("cell %s: %s, skipped", cell.key, status)
+        if _skipped(c, manifest, cell, h):
             continue
         folder = out / "cells" / cell.kind / cell.folder_name(h)
         blocked = [n for n in cell.needs if manifest.status(n, digests[n]) != "done"]
@@ -190,13 +197,75 @@ def run_cells(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path],
                                unless_taken=True):
             log.info("cell %s: taken by another study process, skipped", cell.key)
             continue
-        t0 = time.perf_counter()
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            entry = {"status": "done", "info": execute(cell, folder)}
-        except Exception as e:  # recorded, reported in table.txt; the other cells still run
-            log.error("cell %s failed:\n%s", cell.key, traceback.format_exc())
-            entry = {"status": "failed", "error": f"{type(e).__name__}: {e}"}
-        manifest.record(cell.key, {"hash": h, "dir": str(folder), "seconds": round(time.perf_counter() - t0, 1),
-                                   **entry})
+        entry, seconds = _run_cell(execute, cell, folder)
+        manifest.record(cell.key, {"hash": h, "dir": str(folder), "seconds": seconds, **entry})
     return manifest
+
+
+def _skipped(c: StudyConfig, manifest: Ledger, cell: Cell, h: str) -> bool:
+    """Done with this hash, failed (not retried), or running in a live study process: not run again here."""
+    status = manifest.status(cell.key, h)
+    if status == "done" or (status == "failed" and not c.study.retry_failed) or (
+            status == "running" and process_alive(manifest.entry(cell.key, h).get("pid"))):
+        log.info("cell %s: %s, skipped", cell.key, status)
+        return True
+    return False
+
+
+def run_cells_ray(c: StudyConfig, cells: list[Cell], execute: Callable[[Cell, Path], dict], out: Path) -> Ledger:
+    """`run_cells` on a Ray cluster (`c.ray`: an address, "auto", or "local" for one started here): every cell whose
+    needs are done runs as a Ray task (`c.ray_cpus_per_cell` CPUs), side by side; this process keeps the
+    done-manifest, so the same cells are skipped, blocked, failed and resumed as `run_cells` does. The workers need
+    the study's `out` and scenes at the same paths (one machine, or a shared file system)."""
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(**({} if c.ray == "local" else {"address": c.ray}), include_dashboard=False, log_to_driver=False)
+    task = ray.remote(num_cpus=max(1, int(c.ray_cpus_per_cell)), max_retries=0)(_run_cell)
+    digests = cell_digests(c, cells)
+    manifest = Ledger(out / MANIFEST)
+    todo = [cell for cell in cells if not _skipped(c, manifest, cell, digests[cell.key])]
+    pending = {}
+    while todo or pending:
+        for cell in list(todo):
+            h, folder = digests[cell.key], out / "cells" / cell.kind / cell.folder_name(digests[cell.key])
+            open_keys = {p.key for p in todo} | {p.key for p in pending.values()}
+            if any(n in open_keys for n in cell.needs):  # a cell it needs is still to run or running
+                continue
+            needs = {n: manifest.status(n, digests[n]) for n in cell.needs}
+            todo.remove(cell)
+            blocked = [n for n, st in needs.items() if st != "done"]
+            if blocked:
+                log.warning("cell %s: blocked by %s", cell.key, blocked)
+                manifest.record(cell.key, {"hash": h, "status": "blocked", "dir": str(folder), "blocked_by": blocked})
+                continue
+            if not manifest.record(cell.key, {"hash": h, "status": "running", "dir": str(folder), "pid": os.getpid()},
+                                   unless_taken=True):
+                log.info("cell %s: taken by another study process, skipped", cell.key)
+                continue
+            log.info("cell %s -> %s (Ray task)", cell.key, folder)
+            pending[task.remote(execute, cell, folder)] = cell
+        if not pending:
+            break
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        cell = pending.pop(ready[0])
+        try:
+            entry, seconds = ray.get(ready[0])
+        except Exception as e:  # noqa: BLE001 - a lost worker fails its cell only
+            entry, seconds = {"status": "failed", "error": f"{type(e).__name__}: {e}"}, None
+        h = digests[cell.key]
+        manifest.record(cell.key, {"hash": h, "dir": str(out / "cells" / cell.kind / cell.folder_name(h)),
+                                   **({} if seconds is None else {"seconds": seconds}), **entry})
+    return manifest
+
+
+def _run_cell(execute: Callable[[Cell, Path], dict], cell: Cell, folder: Path) -> tuple[dict, float]:
+    """One cell in a worker: (manifest entry, seconds); an error is recorded, never raised (as in `run_cells`)."""
+    t0 = time.perf_counter()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        entry = {"status": "done", "info": execute(cell, folder)}
+    except Exception as e:  # noqa: BLE001 - recorded, reported in the tables; the other cells still run
+        log.error("cell %s failed:\n%s", cell.key, traceback.format_exc())
+        entry = {"status": "failed", "error": f"{type(e).__name__}: {e}"}
+    return entry, round(time.perf_counter() - t0, 1)

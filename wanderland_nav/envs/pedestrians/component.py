@@ -20,8 +20,9 @@ import torch
 
 from wanderland_nav import keys
 from wanderland_nav.envs.pedestrians.config import PedestrianConfig
-from wanderland_nav.envs.pedestrians.crowd import Crowd, SocialCounters
-from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES, social_metrics
+from wanderland_nav.envs.pedestrians.crowd import Crowd
+from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES
+from wanderland_nav.evaluation.social import SocialCounters, episode_metrics, time_to_collision
 
 PEDESTRIAN_CAUSE = INTERVENTION_CAUSES.index("pedestrian") + 1
 
@@ -66,7 +67,7 @@ class Pedestrians(NoPedestrians):
                  device):
         self.cfg, self.period = cfg, float(period)
         self.crowd = Crowd(cfg, navmesh, nav_from_scene, starts_scene, batch, period)
-        self.social = SocialCounters(batch, device)
+        self.social = SocialCounters(batch, device, period=self.period, robot_radius=cfg.robot_radius)
 
     def seed(self, seed: int) -> None:
         self.crowd.seed(seed)
@@ -80,11 +81,15 @@ class Pedestrians(NoPedestrians):
         social metrics (`dyaw`: the robots' heading change). A touch (centres closer than the two radii) is an
         intervention with cause "pedestrian" where no other rule ended the episode. -> (intervention, truncated,
         cause, personal-space penalty `[B]`)."""
-        pc = self.cfg
-        robot_vel = (end[:, :2] - prev_pos[:, :2]) / self.period
-        dist = self.crowd.step(end, robot_vel).to(end.device)  # [B] nearest approach during the step
+        pc, crowd = self.cfg, self.crowd
+        disp = end[:, :2] - prev_pos[:, :2]
+        robot_vel = disp / self.period
+        dist = crowd.step(end, robot_vel).to(end.device)  # [B] nearest approach during the step
         contact = dist < pc.radius + pc.robot_radius
-        self.social.update(dist, contact, dyaw)
+        rel = crowd.pos[..., :2] - end[:, None, :2].float().cpu()  # [B, P, 2]: the state the step ended in
+        ttc = time_to_collision(rel, crowd.vel - robot_vel[:, None].float().cpu(), pc.radius + pc.robot_radius)
+        ttc = torch.where(contact, 0.0, ttc.amin(1).to(end.device))  # a touch inside the period: no time left
+        self.social.update(dist, contact, ttc, disp, dyaw)
         if pc.collision_intervention:
             cause = torch.where(contact & (cause == 0) & ~success, PEDESTRIAN_CAUSE, cause)
             intervention = cause > 0
@@ -99,17 +104,17 @@ class Pedestrians(NoPedestrians):
         return {k: v[idx] for k, v in self.social.values.items()}
 
     def fill_metrics(self, m, columns, j) -> None:
-        social_metrics(m, {k: columns[k][j] for k in self.social.FIELDS}, self.cfg.count, self.period)
+        values = episode_metrics({k: columns[k][j] for k in self.social.FIELDS}, m.path_length, m.shortest_length,
+                                 self.period)
+        m.pedestrians = self.cfg.count
+        for name, x in values.items():
+            setattr(m, name, int(x) if name == "person_collisions" else float(x))
 
     def episode_metrics(self, path_length, shortest) -> dict:
-        """`(EPISODE, social name)` -> `[B, 1]`, as `metrics.social_metrics` defines them."""
-        v, T = self.social.values, self.period
-        irregularity = v["turning"] / torch.maximum(path_length, shortest).clamp_min(1e-6)
-        col = lambda x: x.unsqueeze(-1)  # noqa: E731
-        return {keys.EPISODE_PERSON_COLLISIONS: col(v["contacts"]),
-                keys.EPISODE_NEAR_05_SECONDS: col(v["near_05"] * T), keys.EPISODE_NEAR_10_SECONDS: col(v["near_10"] * T),
-                keys.EPISODE_MIN_PERSON_DISTANCE: col(v["min_distance"]),
-                keys.EPISODE_PATH_IRREGULARITY: col(irregularity.float())}
+        """`(EPISODE, social name)` -> `[B, 1]`, as `evaluation.social.episode_metrics` defines them."""
+        values = episode_metrics(self.social.values, path_length, shortest, self.period)
+        return {key: values[key[1]].to(path_length.device, torch.int64 if key[1] == "person_collisions"
+                                       else torch.float32).unsqueeze(-1) for key in keys.EPISODE_SOCIAL_KEYS}
 
     def to(self, device) -> "Pedestrians":
         self.social.to(device)

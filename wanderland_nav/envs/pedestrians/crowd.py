@@ -9,8 +9,8 @@ Destinations are a pool of `waypoints` points drawn once on the robot's island, 
 serves every person. Spawns keep `spawn_clearance` from the robot. Every draw comes from the crowd's
 own generator (`seed`): same seed, same crowd.
 
-`SocialCounters` accumulates what the robot experienced per episode (collisions, time near people,
-closest approach, heading change) for `EpisodeMetrics`.
+What the robots experienced of their people per episode is counted by `evaluation.social.SocialCounters`
+(`component.py`).
 """
 
 from __future__ import annotations
@@ -195,36 +195,3 @@ class Crowd:
     def gaussians(self, device="cpu"):
         """The people as `CameraGaussians` `[B, P * 6]` (scene frame) on `device`, for the B env cameras."""
         return body_gaussians(self.pos, self.yaw, self.height, self.colour, self.R).to(device)
-
-
-class SocialCounters:
-    """Per-episode social metrics of B robots, `[B]` tensors, reset with the episodes.
-
-    contacts: steps in which a person came closer than `radius + robot_radius`; near_05 / near_10: steps
-    with a person within 0.5 m / 1.0 m (centre distance); min_distance: closest centre distance; turning:
-    total absolute heading change (rad), which per metre travelled is the path irregularity."""
-
-    FIELDS = ("contacts", "near_05", "near_10", "min_distance", "turning")
-
-    def __init__(self, batch: int, device):
-        z = torch.zeros(batch, device=device)
-        self.values = {"contacts": z.long(), "near_05": z.long(), "near_10": z.long(),
-                       "min_distance": z + float("inf"), "turning": z.clone()}
-
-    def reset(self, idx: torch.Tensor) -> None:
-        for k, v in self.values.items():
-            fill = float("inf") if k == "min_distance" else 0
-            self.values[k] = v.index_fill(0, idx, fill)
-
-    def update(self, dist: torch.Tensor, contact: torch.Tensor, dyaw: torch.Tensor) -> None:
-        """dist `[B]` to the nearest person, contact `[B]` bool, dyaw `[B]` heading change this step (rad)."""
-        v = self.values
-        v["contacts"] = v["contacts"] + contact.long()
-        v["near_05"] = v["near_05"] + (dist < 0.5).long()
-        v["near_10"] = v["near_10"] + (dist < 1.0).long()
-        v["min_distance"] = torch.minimum(v["min_distance"], dist)
-        v["turning"] = v["turning"] + dyaw.abs()
-
-    def to(self, device) -> "SocialCounters":
-        self.values = {k: v.to(device) for k, v in self.values.items()}
-        return self
