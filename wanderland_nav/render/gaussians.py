@@ -170,7 +170,10 @@ class Gaussians:
             missing = [p for p in props if p not in names]
             if missing:
                 raise PlyError(f"{path}: Gaussian PLY is missing property {missing} needed for {field}")
-            out = np.stack([v[p].astype(np.float64) for p in props], axis=-1) if props else np.zeros((len(v), 0))
+            # in the file's own float precision (float32 for every 3DGS exporter we know; the conversion to
+            # float64 would be exact but doubles the memory: a paper-size splat's f_rest is 1.3 GB in float32)
+            out = np.stack([v[p].astype(np.promote_types(v[p].dtype, np.float32), copy=False) for p in props],
+                           axis=-1) if props else np.zeros((len(v), 0))
             if np.isnan(out).any():
                 raise PlyError(f"{path}: {field} contains {int(np.isnan(out).sum())} NaN values")
             if field != "opacity" and not np.isfinite(out).all():

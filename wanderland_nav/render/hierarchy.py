@@ -17,8 +17,18 @@ that contains its children's spheres (leaves: 3.33 standard deviations, the rend
 Merge of children i with activated opacity a_i and footprint area A_i (pi * product of the two largest
 standard deviations): weights w_i = a_i A_i; mean and covariance by moment matching
 (mu = sum w mu_i / W, Sigma = sum w (Sigma_i + d_i d_i^T) / W); SH coefficients weighted alike (they are
-linear in colour); opacity min(1, W / A) so that the parent, seen from afar, covers the area its
-children cover.
+linear in colour); opacity W / A (at most `OPACITY_MAX`), so that the parent, seen from afar, carries the
+opacity mass its children carry. That opacity may exceed 1: the renderer caps each pixel's alpha (0.999),
+so a dense merge (children that overlap, as the Gaussians of a surface do) draws as a flat-topped footprint,
+opaque out to where its children end and falling off only at their edge. Capped at 1, the same merge is a
+Gaussian bump whose tails leave see-through seams where neighbouring merges meet (and a thinner, darker
+surface at a distance).
+
+The cut is not by size alone: each merged node carries `lod_scale`, its merge error (the colour spread of
+the leaves below it, plus how much more opaque its children are than itself) in units of `LOD_ERROR_REF`,
+clamped to `LOD_SCALE_RANGE`, and the cut compares size x lod_scale with the target. A uniform patch
+stays coarser than the target, a textured one or an edge is drawn finer; the cost stays bounded by the
+image (at most the cut at target / LOD_SCALE_RANGE[1]).
 """
 
 from __future__ import annotations
