@@ -26,9 +26,11 @@ surface at a distance).
 
 The cut is not by size alone: each merged node carries `lod_scale`, its merge error (the colour spread of
 the leaves below it, plus how much more opaque its children are than itself) in units of `LOD_ERROR_REF`,
-clamped to `LOD_SCALE_RANGE`, and the cut compares size x lod_scale with the target. A uniform patch
-stays coarser than the target, a textured one or an edge is drawn finer; the cost stays bounded by the
-image (at most the cut at target / LOD_SCALE_RANGE[1]).
+clamped to `LOD_SCALE_RANGE`, and the cut compares size x lod_scale with the target. A uniform patch is
+cut by its size, a textured one or an edge finer; the cost stays bounded by the image (at most the cut at
+target / LOD_SCALE_RANGE[1]). Letting uniform patches grow coarser than the target (a lower bound of 0.5)
+saved a quarter to a third of the Gaussians but cost 2.7-7.8 dB on a paper-size district's views
+(experiments/render/README.md, Result 5).
 """
 
 from __future__ import annotations
@@ -51,11 +53,11 @@ from .sh import SH_C0
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [children, K, 3] temporaries)
 START_NODES = 256  # each view's descent starts at the largest level of at most this many nodes
 LOD_ERROR_REF = 0.05  # RGB standard deviation (plus opacity defect) of a merge at which the cut takes its size as is
-LOD_SCALE_RANGE = (0.5, 2.0)  # the cut's size multipliers: uniform merges may project to 2x the target, varied ones to 1/2
+LOD_SCALE_RANGE = (1.0, 2.0)  # the cut's size multipliers: uniform merges project to the target, varied ones to 1/2
 OPACITY_MAX = 8.0  # a merged node's opacity may exceed 1 (see the module docstring: the flat-topped footprint)
 CULL_MARGIN_PX = 4.0  # the frustum is widened by this many pixels: the renderer's eps2d blur and +1 px bound
 
@@ -307,9 +309,9 @@ def lod_scales(spread: torch.Tensor, defect: torch.Tensor) -> torch.Tensor:
     clamped to `LOD_SCALE_RANGE`. spread: the RGB standard deviation (per channel, DC colour) of every leaf
     below the node, weighted as the merge weights them; defect: how much more opaque the children are on
     average than the merged node (a node that cannot cover what they cover: the see-through seams between
-    merged nodes). The cut treats a uniform patch (a plain wall, the ground) as `LOD_SCALE_RANGE[0]` times its
-    size, so it stays coarser, and a textured one (window frames on a facade, an edge) as up to
-    `LOD_SCALE_RANGE[1]` times, so it is drawn finer."""
+    merged nodes). The cut takes a uniform patch (a plain wall, the ground) at `LOD_SCALE_RANGE[0]` times its
+    size and a textured one (window frames on a facade, an edge) at up to `LOD_SCALE_RANGE[1]` times, so that
+    one is drawn finer."""
     return ((spread + defect) / LOD_ERROR_REF).clamp(*LOD_SCALE_RANGE)
 
 
