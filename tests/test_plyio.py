@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from wanderland_nav.render.plyio import element_table, read_ply_data, write_ply_table
 
@@ -61,3 +62,30 @@ def test_errors_name_file_element_row_and_property(tmp_path):
         read_ply_data(tmp_path / "missing.ply", Bad)
     with pytest.raises(ValueError, match=r"x\.ply: .*structured"):
         write_ply_table(tmp_path / "x.ply", np.zeros(3))
+
+
+def test_chunked_write_is_the_whole_table_write_byte_for_byte(tmp_path):
+    """`write_ply_chunks` (a splat saved a block at a time) writes the bytes `write_ply_table` writes, and
+    refuses a row count that does not match what it announced."""
+    from wanderland_nav.render import Gaussians
+    from wanderland_nav.render.plyio import write_ply_chunks, write_ply_table
+
+    rng = np.random.default_rng(0)
+    table = np.zeros(1000, dtype=[("x", "<f4"), ("y", "<f4"), ("f_rest_0", "<f4")])
+    for name in table.dtype.names:
+        table[name] = rng.normal(size=1000)
+    write_ply_table(tmp_path / "whole.ply", table)
+    write_ply_chunks(tmp_path / "chunks.ply", table.dtype, 1000, (table[a:a + 77] for a in range(0, 1000, 77)))
+    assert (tmp_path / "chunks.ply").read_bytes() == (tmp_path / "whole.ply").read_bytes()
+    with pytest.raises(ValueError, match="999 rows written, 1000 announced"):
+        write_ply_chunks(tmp_path / "short.ply", table.dtype, 1000, [table[:999]])
+    assert not (tmp_path / "short.ply").exists()
+    gen = torch.Generator().manual_seed(0)
+    n = 500
+    g = Gaussians(torch.randn(n, 3, generator=gen), torch.randn(n, 3, generator=gen), torch.randn(n, 4, generator=gen),
+                  torch.randn(n, generator=gen), torch.randn(n, 3, generator=gen), torch.randn(n, 15, 3, generator=gen))
+    g.save(tmp_path / "a.ply", chunk=64)
+    g.save(tmp_path / "b.ply", chunk=n)
+    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+    back = Gaussians.load(tmp_path / "a.ply")
+    assert torch.equal(back.sh_rest, g.sh_rest) and torch.equal(back.means, g.means)

@@ -163,3 +163,32 @@ def test_our_file_on_another_navmesh_is_regenerated_with_its_own_settings(demo, 
     assert (again["seed"], again["num_episodes"], again["settings"]) == (2, 3, recorded["settings"])  # ... as before
     assert not generate.refresh_if_stale(scene, ours, lambda: nm)                 # and now up to date
     assert not generate.refresh_if_stale(scene, foreign, lambda: nm) and foreign.read_bytes() == before  # not ours: untouched
+
+
+def test_goal_images_through_the_fused_camera_equal_the_reference(demo, tmp_path):
+    """Goal views render on the fused camera by default; the torch reference gives the same PNGs (8-bit levels
+    may differ by one where a value sits on a rounding edge)."""
+    from PIL import Image
+
+    from wanderland_nav.episodes.goal_images import render_goal_images
+    from wanderland_nav.render import fused
+
+    if not fused.available():
+        pytest.skip("the fused camera kernel cannot be built here (no C++ compiler)")
+    scene, _ = demo
+    R = scene.nav_from_scene
+    pick = scene.cameras[:: max(1, len(scene.cameras) // 4)][:4]
+    goals = np.stack([np.linalg.inv(c.cam_from_world)[:3, 3] for c in pick]) @ R.T - [0.0, 0.0, 1.5]
+    yaws = np.linspace(0.0, 2 * np.pi, len(goals), endpoint=False)
+    images = {}
+    for backend in ("fused", "torch"):
+        out = [tmp_path / backend / f"{i}.png" for i in range(len(goals))]
+        out[0].parent.mkdir()
+        render_goal_images(scene.gaussians_path, goals, yaws, R, out, height=1.5, width=48, image_height=32,
+                           batch=3, backend=backend)
+        images[backend] = np.stack([np.asarray(Image.open(p)).astype(int) for p in out])
+    diff = np.abs(images["fused"] - images["torch"])
+    assert images["fused"].shape == (len(goals), 32, 48, 3) and images["fused"].std() > 5.0
+    assert diff.max() <= 1 and diff.mean() < 0.01, (diff.max(), diff.mean())
+    assert GeneratorSettings().render_backend == "fused"
+    assert "render_backend" not in GeneratorSettings().to_dict()  # how the views are rendered is not what they are

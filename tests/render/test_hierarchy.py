@@ -196,8 +196,15 @@ def test_stale_cache_of_another_build_is_ignored(tmp_path, monkeypatch):
     assert hier.load_nodes(tmp_path / "3dgs.lod.npz", source_sha256=sha) is None
 
 
-def test_nodes_as_gaussians_render_as_the_cut():
+def test_nodes_as_gaussians_render_as_the_cut(monkeypatch, caplog):
+    """Exact where every merged opacity is at most 1 (a logit's range); denser merges are clamped and counted."""
     g = random_gaussians(2000)
+    dense = build_hierarchy(g, target_px=2.0)
+    assert bool((dense.nodes.opacities > 1).any())  # overlapping children: a flat-topped merge
+    ids = torch.arange(dense.num_leaves, dense.num_nodes)
+    assert float(dense.as_gaussians(ids).opacities.max()) <= 1.0
+    assert "opacity above 1" in caplog.text
+    monkeypatch.setattr(hier, "OPACITY_MAX", 1.0)
     h = build_hierarchy(g, target_px=2.0)
     vm, K = look_at_views(1, 12.0), intrinsics(1, 32)
     _, nodes = h.cut(vm, K, 32, 32, 2.0)
@@ -214,7 +221,7 @@ def test_cut_pairs_render_as_padded_one_camera_scenes(mode, people):
 
     g = random_gaussians(3000, seed=3)
     h = build_hierarchy(g, target_px=1.0)
-    vm = torch.cat([look_at_views(3, 12.0), look_at_views(2, 60.0)])  # near and far: unequal cuts
+    vm = torch.cat([look_at_views(3, 12.0), look_at_views(2, 150.0)])  # near and far: unequal cuts
     K, bg = intrinsics(5, 32), torch.tensor([0.1, 0.2, 0.3]).expand(5, 3)
     cams, _ = h.cut(vm, K, 32, 32, 1.0)
     counts = torch.bincount(cams, minlength=5)

@@ -65,6 +65,7 @@ class GeneratorSettings:
     goal_camera_height: float | None = None  # metres above the ground; None: median capture-camera height
     goal_image_lod_px: float | None = DEFAULT_LOD_PX  # the splat's level of detail for goal views (render/lod.py); None: all
     render_device: str = "cpu"
+    render_backend: str = "fused"  # render() backend of the goal views ("torch": the reference; the same images)
     decimals: int = 4  # rounding of every written coordinate (0.1 mm)
     # a scene's `scene_meta.json` may name the sampler fields its episodes use (`episode_sampler`, e.g. a
     # district's long routes); they replace these `sampler` fields unless this is false
@@ -81,7 +82,8 @@ class GeneratorSettings:
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["splits"] = list(self.splits)
-        d.pop("render_device")  # where we render does not change the result
+        d.pop("render_device")  # where and how we render does not change the result
+        d.pop("render_backend")
         if self.scene_sampler:  # recorded only when off: the recorded sampler is the one used
             d.pop("scene_sampler")
         return d
@@ -247,7 +249,8 @@ def _goal_images(scene, sampler: EndpointSampler, geo: _RouteGeometry, R_ns: np.
             scene.gaussians_path, np.stack([c[-1] for c in geo.corners_nav]), geo.yaw_goal, R_ns,
             [tmp / n for n in names], height=height,
             width=settings.goal_image_width, image_height=settings.goal_image_height,
-            hfov_deg=settings.goal_image_hfov_deg, lod_px=settings.goal_image_lod_px, device=settings.render_device)
+            hfov_deg=settings.goal_image_hfov_deg, lod_px=settings.goal_image_lod_px, device=settings.render_device,
+            backend=settings.render_backend)
     return [goal_image_dir / n for n in names]
 
 

@@ -2,7 +2,9 @@
 
 Why this pose: image-goal policies (NoMaD, CityWalker) are trained on the view the agent sees when it
 arrives, which is the view along its final approach; rendering it with the same splat renderer as the
-env keeps goal images and observations consistent. Cameras are batched through `render()`.
+env keeps goal images and observations consistent. Cameras are batched through `render()`, on the env's
+fused camera by default (`backend="fused"`, `render/fused.py`: the same image as the torch reference,
+`backend="torch"`, which renders where the kernel cannot be built).
 """
 
 from __future__ import annotations
@@ -37,13 +39,15 @@ def goal_camera_poses(goals_nav: np.ndarray, yaws_nav: np.ndarray, nav_from_scen
 def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np.ndarray,
                        nav_from_scene: np.ndarray, out_paths: Sequence[Path], *, height: float,
                        width: int = 320, image_height: int = 240, hfov_deg: float = 90.0, pitch: float = 0.0,
-                       batch: int = 8, lod_px: float | None = DEFAULT_LOD_PX, device: str = "cpu") -> list[Path | None]:
+                       batch: int = 8, lod_px: float | None = DEFAULT_LOD_PX, device: str = "cpu",
+                       backend: str = "fused") -> list[Path | None]:
     """Render one PNG per goal into `out_paths` (atomic writes); returns the paths (all None, with a
     warning, when the scene has no Gaussians: `gaussians_path=None`).
 
     goals_nav `[N, 3]` feet positions (nav frame), yaws_nav `[N]` headings (rad). The splat is loaded
     once, at the camera's level of detail `lod_px` (`render.lod`; None: every Gaussian, frustum-culled
-    per batch), and rendered `batch` cameras at a time (memory grows with C * H * W).
+    per batch), and rendered `batch` cameras at a time (memory grows with C * H * W) by `render()`'s
+    `backend` ("fused": one compiled call per batch; "torch": the reference; both give the same images).
     """
 
 
@@ -66,9 +70,9 @@ def render_goal_images(gaussians_path: Path, goals_nav: np.ndarray, yaws_nav: np
             Ks = K.expand(len(vm), 3, 3)
             if isinstance(g, Gaussians):  # every Gaussian: cull to the frustum first (~4x per view)
                 out = render(g[frustum_mask(g.means, g.log_scales, vm, Ks, width, image_height)], vm, Ks, width,
-                             image_height, render_mode="RGB")
+                             image_height, render_mode="RGB", backend=backend)
             else:  # the hierarchy culls and cuts per view
-                out = render(g, vm, Ks, width, image_height, render_mode="RGB")
+                out = render(g, vm, Ks, width, image_height, render_mode="RGB", backend=backend)
             rgb = (out.rgb.clamp(0, 1) * 255).round().to(torch.uint8).cpu().numpy()  # [C, H, W, 3]
             for img, p in zip(rgb, out_paths[i:i + batch]):
                 with atomic_path(p) as tmp:

@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("fused_kernel.cpp")
 FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off", "-fno-math-errno", "-fno-trapping-math", "-pthread")
-ABI_VERSION = 3
+ABI_VERSION = 4
 CAMERA_MODELS = {"pinhole": 0, "fisheye": 1}
 DEPTH_MODES = {"RGB": 0, "D": 1, "RGB+D": 1, "ED": 2, "RGB+ED": 2}
 
@@ -176,16 +176,16 @@ def _c(t: torch.Tensor, dtype=torch.float32) -> torch.Tensor:
     return t.detach().to(dtype).contiguous()
 
 
-def _records(means, radius, covars, opacities, dc, first_id: int = 0) -> torch.Tensor:
+def _records(means, radius, covars, opacities, dc, lod_scale, first_id: int = 0) -> torch.Tensor:
     """[n, 16] float32 node records (fused_kernel.cpp `WlArgs.rec`): centre, radius, the covariance's six
     entries symmetrised as the reference does (`packed._sym6`), opacity, SH DC, the node id (ids first_id..,
-    as int32 bits), 1 unused."""
+    as int32 bits), the cut's size multiplier (`InteriorNodes.lod_scale`)."""
     n = means.shape[0]
     if first_id + n >= 2**31:
         raise ValueError(f"render_fused: {first_id + n} nodes; the kernel's node ids are int32")
     ids = torch.arange(first_id, first_id + n, dtype=torch.int32).view(torch.float32).view(n, 1)
     return torch.cat([_c(means), _c(radius).view(n, 1), _c(_sym6(covars.detach().float())), _c(opacities).view(n, 1),
-                      _c(dc), ids, means.new_zeros(n, 1, dtype=torch.float32)], 1).contiguous()
+                      _c(dc), ids, _c(lod_scale).view(n, 1)], 1).contiguous()
 
 
 def _scene_tables(gaussians: Gaussians | GaussianHierarchy) -> dict:
@@ -198,13 +198,15 @@ def _scene_tables(gaussians: Gaussians | GaussianHierarchy) -> dict:
     if hit is not None and hit["version"] == version:
         return hit
     with torch.no_grad():
-        leaf_radius = gaussians.nodes.radius[:len(g)] if isinstance(gaussians, GaussianHierarchy) else \
-            g.means.new_zeros(len(g))
-        rec = _records(g.means, leaf_radius, g.covariances(), g.opacities, g.sh_dc)
+        tree = isinstance(gaussians, GaussianHierarchy)
+        leaf_radius = gaussians.nodes.radius[:len(g)] if tree else g.means.new_zeros(len(g))
+        leaf_scale = gaussians.nodes.lod_scale[:len(g)] if tree else g.means.new_ones(len(g))
+        rec = _records(g.means, leaf_radius, g.covariances(), g.opacities, g.sh_dc, leaf_scale)
         t = dict(N=len(g), I=0, K=g.sh_rest.shape[1] + 1, use_cut=0, leaf_rest=_c(g.sh_rest))
-        if isinstance(gaussians, GaussianHierarchy):
+        if tree:
             h, n = gaussians, gaussians.nodes
-            inner = _records(n.means, n.radius[len(g):], n.covars, n.opacities, n.sh[:, 0], first_id=len(g))
+            inner = _records(n.means, n.radius[len(g):], n.covars, n.opacities, n.sh[:, 0], n.lod_scale[len(g):],
+                             first_id=len(g))
             order = torch.cat([n.child_ids.long(), torch.tensor([h.root])])  # slot -> node id
             slot = torch.empty_like(order)
             slot[order] = torch.arange(order.numel())

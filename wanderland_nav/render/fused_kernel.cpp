@@ -39,7 +39,7 @@ struct WlArgs {
   int32_t sh_degree, use_cut;
   // one 64-byte record per node (what the cut and the projection read, one cache line): centre x y z,
   // bounding-sphere radius, covariance xx xy xz yy yz zz (off-diagonals symmetrised as packed._sym6),
-  // activated opacity, SH DC r g b, the node's id (int32 bits), 1 unused. Records are stored by slot: a
+  // activated opacity, SH DC r g b, the node's id (int32 bits), the cut's size multiplier (lod_scale). Records are stored by slot: a
   // hierarchy's in the order of its child lists (the root last), so that the children of interior node id j
   // are the slots child_ptr[j - N] .. child_ptr[j - N + 1] - 1, side by side; plain Gaussians' slot = id.
   const float* rec;        // [N + I, 16]
@@ -128,7 +128,7 @@ void cut_camera(const WlArgs& a, int64_t cam, std::vector<int64_t>& out, std::ve
       }
       if (!visible) continue;
       const int64_t id = node_id(rec);
-      const bool expand = id >= N && (close || size > target);
+      const bool expand = id >= N && (close || size * rec[15] > target);
       if (!expand) {
         out.push_back(node);
         continue;
@@ -532,7 +532,7 @@ struct CutResult {
 
 extern "C" {
 
-int wl_abi_version() { return 3; }
+int wl_abi_version() { return 4; }
 
 // Render every camera of `a` into its outputs.
 void wl_render(const WlArgs* a) {

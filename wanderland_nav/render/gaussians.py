@@ -20,12 +20,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .ply import PlyError, read_ply_element, write_ply_element
+from .ply import PlyError, read_ply_element
+from .plyio import write_ply_chunks
 from .projection import quat_scale_to_covar
 
 # |logit| bound applied to non-finite opacities: sigmoid(±20) is 1 - 2e-9 / 2e-9, i.e. fully opaque /
 # transparent in float32, while keeping a finite value (and a non-zero gradient) for training.
 OPACITY_LOGIT_CLIP = 20.0
+SAVE_CHUNK = 1 << 18  # rows per block of `Gaussians.save` (a 65 MB table of SH-3 rows)
 
 _REST_COUNT_TO_DEGREE = {3 * ((d + 1) ** 2 - 1): d for d in range(4)}  # 0->0, 9->1, 24->2, 45->3
 
@@ -168,7 +170,10 @@ class Gaussians:
             missing = [p for p in props if p not in names]
             if missing:
                 raise PlyError(f"{path}: Gaussian PLY is missing property {missing} needed for {field}")
-            out = np.stack([v[p].astype(np.float64) for p in props], axis=-1) if props else np.zeros((len(v), 0))
+            # in the file's own float precision (float32 for every 3DGS exporter we know; the conversion to
+            # float64 would be exact but doubles the memory: a paper-size splat's f_rest is 1.3 GB in float32)
+            out = np.stack([v[p].astype(np.promote_types(v[p].dtype, np.float32), copy=False) for p in props],
+                           axis=-1) if props else np.zeros((len(v), 0))
             if np.isnan(out).any():
                 raise PlyError(f"{path}: {field} contains {int(np.isnan(out).sum())} NaN values")
             if field != "opacity" and not np.isfinite(out).all():
@@ -197,24 +202,27 @@ class Gaussians:
 
         return cls(t(means), t(log_scales), t(quats), t(opac), t(sh_dc), t(sh_rest))
 
-    def save(self, path: str | os.PathLike) -> None:
-        """Write the INRIA 3DGS PLY layout (float32, zero normals, channel-major f_rest), atomically."""
+    def save(self, path: str | os.PathLike, chunk: int = SAVE_CHUNK) -> None:
+        """Write the INRIA 3DGS PLY layout (float32, zero normals, channel-major f_rest), atomically, `chunk`
+        rows at a time (the file is the same for any chunk; memory holds one chunk's table, not the splat's)."""
         n, k1 = len(self), self.sh_rest.shape[1]
-        cols: list[tuple[str, np.ndarray]] = []
+        groups = [(["x", "y", "z"], lambda s: self.means[s]), (["nx", "ny", "nz"], None),
+                  (["f_dc_0", "f_dc_1", "f_dc_2"], lambda s: self.sh_dc[s]),
+                  ([f"f_rest_{i}" for i in range(3 * k1)], lambda s: self.sh_rest[s].transpose(1, 2)),  # channel-major
+                  (["opacity"], lambda s: self.opacity_logits[s]), (["scale_0", "scale_1", "scale_2"], lambda s: self.log_scales[s]),
+                  (["rot_0", "rot_1", "rot_2", "rot_3"], lambda s: self.quats[s])]
+        dtype = np.dtype([(name, "<f4") for names, _ in groups for name in names])
 
-        def add(prefix_names: list[str], arr: torch.Tensor):
-            a = arr.detach().to("cpu", torch.float32).numpy().reshape(n, len(prefix_names))
-            for i, name in enumerate(prefix_names):
-                cols.append((name, a[:, i]))
+        def tables():
+            for a in range(0, n, chunk):
+                s = slice(a, min(n, a + chunk))
+                table = np.zeros(s.stop - s.start, dtype=dtype)
+                for names, get in groups:
+                    if get is None or not names:  # zero normals; no f_rest at SH degree 0
+                        continue
+                    arr = get(s).detach().to("cpu", torch.float32).numpy().reshape(-1, len(names))
+                    for i, name in enumerate(names):
+                        table[name] = arr[:, i]
+                yield table
 
-        add(["x", "y", "z"], self.means)
-        add(["nx", "ny", "nz"], torch.zeros(n, 3))
-        add(["f_dc_0", "f_dc_1", "f_dc_2"], self.sh_dc)
-        add([f"f_rest_{i}" for i in range(3 * k1)], self.sh_rest.transpose(1, 2))  # [N,3,K-1] channel-major
-        add(["opacity"], self.opacity_logits)
-        add(["scale_0", "scale_1", "scale_2"], self.log_scales)
-        add(["rot_0", "rot_1", "rot_2", "rot_3"], self.quats)
-        table = np.empty(n, dtype=[(name, "<f4") for name, _ in cols])
-        for name, a in cols:
-            table[name] = a
-        write_ply_element(path, table, "vertex")
+        write_ply_chunks(path, dtype, n, tables(), "vertex")

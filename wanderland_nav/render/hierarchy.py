@@ -17,8 +17,20 @@ that contains its children's spheres (leaves: 3.33 standard deviations, the rend
 Merge of children i with activated opacity a_i and footprint area A_i (pi * product of the two largest
 standard deviations): weights w_i = a_i A_i; mean and covariance by moment matching
 (mu = sum w mu_i / W, Sigma = sum w (Sigma_i + d_i d_i^T) / W); SH coefficients weighted alike (they are
-linear in colour); opacity min(1, W / A) so that the parent, seen from afar, covers the area its
-children cover.
+linear in colour); opacity W / A (at most `OPACITY_MAX`), so that the parent, seen from afar, carries the
+opacity mass its children carry. That opacity may exceed 1: the renderer caps each pixel's alpha (0.999),
+so a dense merge (children that overlap, as the Gaussians of a surface do) draws as a flat-topped footprint,
+opaque out to where its children end and falling off only at their edge. Capped at 1, the same merge is a
+Gaussian bump whose tails leave see-through seams where neighbouring merges meet (and a thinner, darker
+surface at a distance).
+
+The cut is not by size alone: each merged node carries `lod_scale`, its merge error (the colour spread of
+the leaves below it, plus how much more opaque its children are than itself) in units of `LOD_ERROR_REF`,
+clamped to `LOD_SCALE_RANGE`, and the cut compares size x lod_scale with the target. A uniform patch is
+cut by its size, a textured one or an edge finer; the cost stays bounded by the image (at most the cut at
+target / LOD_SCALE_RANGE[1]). Letting uniform patches grow coarser than the target (a lower bound of 0.5)
+saved a quarter to a third of the Gaussians but cost 2.7-7.8 dB on a paper-size district's views
+(experiments/render/README.md, Result 5).
 """
 
 from __future__ import annotations
@@ -38,12 +50,16 @@ from wanderland_nav.geometry import rotmat_to_quat
 
 from .gaussians import Gaussians
 from .packed import RADIUS_SIGMAS
+from .sh import SH_C0
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 4
 MERGE_CHUNK = 1 << 16  # parents merged per batched step (bounds the [children, K, 3] temporaries)
 START_NODES = 256  # each view's descent starts at the largest level of at most this many nodes
+LOD_ERROR_REF = 0.05  # RGB standard deviation (plus opacity defect) of a merge at which the cut takes its size as is
+LOD_SCALE_RANGE = (1.0, 2.0)  # the cut's size multipliers: uniform merges project to the target, varied ones to 1/2
+OPACITY_MAX = 8.0  # a merged node's opacity may exceed 1 (see the module docstring: the flat-topped footprint)
 CULL_MARGIN_PX = 4.0  # the frustum is widened by this many pixels: the renderer's eps2d blur and +1 px bound
 
 
@@ -63,6 +79,7 @@ class InteriorNodes:
     radius: torch.Tensor
     child_ptr: torch.Tensor
     child_ids: torch.Tensor
+    lod_scale: torch.Tensor
 
     def to(self, device) -> "InteriorNodes":
         return InteriorNodes(*(getattr(self, f.name).to(device) for f in fields(self)))
@@ -159,8 +176,14 @@ class GaussianHierarchy:
     @torch.no_grad()
     def as_gaussians(self, ids: torch.Tensor) -> Gaussians:
         """Nodes `ids [M]` as raw `Gaussians` (covariances factored into rotation and log-scales): a cut
-        saved as a PLY, or handed to code that takes plain Gaussians, renders as the cut does."""
+        saved as a PLY, or handed to code that takes plain Gaussians, renders as the cut does, except for merged
+        nodes of opacity above 1 (`OPACITY_MAX`), which a logit cannot hold: they are clamped to 1, with a warning
+        that counts them."""
         means, covars, opac, sh = self.gather(ids)
+        dense = int((opac > 1).sum())
+        if dense:
+            log.warning("as_gaussians: %d of %d nodes have opacity above 1 (dense merges); clamped to 1", dense,
+                        opac.numel())
         ev, vec = torch.linalg.eigh(covars.double())  # ascending eigenvalues, orthonormal columns
         vec[..., 2] *= torch.linalg.det(vec).sign()[:, None]  # a proper rotation
         quats = rotmat_to_quat(vec).to(means.dtype)
@@ -189,6 +212,7 @@ class GaussianHierarchy:
         while cam.numel():
             # [k, P] rows (contiguous, one gather each): the camera's table, the node's centre and radius
             c, m, r = table.index_select(1, cam), means_t.index_select(1, node), radius.index_select(0, node)
+            s = n.lod_scale.index_select(0, node)
             x, y, z = (c[3 * i] * m[0] + c[3 * i + 1] * m[1] + c[3 * i + 2] * m[2] + c[9 + i] for i in range(3))
             dist = torch.sqrt(x * x + y * y + z * z)
             visible = z + r >= near_plane
@@ -200,7 +224,7 @@ class GaussianHierarchy:
             else:
                 size = c[12] * r / (dist - r).clamp_min(1e-6)
                 close = dist - r <= near_plane
-            expand = visible & (node >= N) & (close | (size > target_px))
+            expand = visible & (node >= N) & (close | (size * s > target_px))
             keep = (visible & ~expand).nonzero().squeeze(1)
             picked_cam.append(cam.index_select(0, keep))
             picked_node.append(node.index_select(0, keep))
@@ -265,10 +289,22 @@ def _area(covars: torch.Tensor) -> torch.Tensor:
     return torch.pi * torch.sqrt(ev[..., 1] * ev[..., 2])
 
 
+def lod_scales(spread: torch.Tensor, defect: torch.Tensor) -> torch.Tensor:
+    """What the cut multiplies a merged node's projected size by: its merge error in units of `LOD_ERROR_REF`,
+    clamped to `LOD_SCALE_RANGE`. spread: the RGB standard deviation (per channel, DC colour) of every leaf
+    below the node, weighted as the merge weights them; defect: how much more opaque the children are on
+    average than the merged node (a node that cannot cover what they cover: the see-through seams between
+    merged nodes). The cut takes a uniform patch (a plain wall, the ground) at `LOD_SCALE_RANGE[0]` times its
+    size and a textured one (window frames on a facade, an edge) at up to `LOD_SCALE_RANGE[1]` times, so that
+    one is drawn finer."""
+    return ((spread + defect) / LOD_ERROR_REF).clamp(*LOD_SCALE_RANGE)
+
+
 def _merge(rows, group: torch.Tensor, P: int):
-    """Merge the children `rows` (means [n,3], covars [n,3,3], opacities [n], sh [n,K,3], radius [n]) into
-    `P` parents; `group [n]` (sorted) is each child's parent. -> the parents' rows, in the same layout."""
-    means, covars, opac, sh, radius = rows
+    """Merge the children `rows` (means [n,3], covars [n,3,3], opacities [n], sh [n,K,3], radius [n], colour
+    variance [n]) into `P` parents; `group [n]` (sorted) is each child's parent. -> the parents' rows, in the
+    same layout, and their `lod_scales` [P]."""
+    means, covars, opac, sh, radius, cvar = rows
     mass = opac * _area(covars)  # [n]
     seg = lambda x: x.new_zeros((P,) + x.shape[1:]).index_add_(0, group, x)  # noqa: E731  segment sums
     W = seg(mass)
@@ -279,9 +315,13 @@ def _merge(rows, group: torch.Tensor, P: int):
     d = means - mu[group]
     cov = seg(w[:, None, None] * (covars + d[:, :, None] * d[:, None, :]))
     sh_p = seg(w[:, None, None] * sh)
-    alpha = (W / _area(cov).clamp_min(1e-20)).clamp(max=1.0)
+    alpha = (W / _area(cov).clamp_min(1e-20)).clamp(max=OPACITY_MAX)
     rad = radius.new_zeros(P).scatter_reduce_(0, group, d.norm(dim=-1) + radius, "amax")
-    return mu, cov, alpha, sh_p, rad
+    dev = sh[:, 0] - sh_p[group, 0]
+    cvar_p = seg(w * (cvar + (dev * dev).sum(-1)))  # the DC colour's variance over every leaf below, 3 channels
+    spread = SH_C0 * torch.sqrt(cvar_p / 3)
+    defect = (seg(w * opac) - alpha).clamp_min(0)
+    return (mu, cov, alpha, sh_p, rad, cvar_p), lod_scales(spread, defect)
 
 
 @torch.no_grad()
@@ -298,15 +338,17 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
     code = morton_codes(g.means)
     order = torch.argsort(code, stable=True)
     items, code = order, code[order]  # the current level's node ids in Morton order, and their cells' codes
-    levels: list[tuple] = []  # rows (means, covars, opacities, sh, radius) of each level's new nodes
+    levels: list[tuple] = []  # rows (means, covars, opacities, sh, radius, colour variance) and lod scales of each level's new nodes
     child_runs: list[torch.Tensor] = []  # per level: the children of its new nodes, in parent order
     counts: list[torch.Tensor] = []  # per level: children per new node
     next_id = N
 
+    leaf_cvar = g.means.new_zeros(N)
+
     def rows(ids: torch.Tensor):
         """Rows of node ids (leaves and earlier levels' nodes, mixed) in the merge layout."""
         leaf = ids < N
-        parts = [(leaf, ids[leaf], (g.means, leaf_cov, leaf_opac, None, leaf_radius))]
+        parts = [(leaf, ids[leaf], (g.means, leaf_cov, leaf_opac, None, leaf_radius, leaf_cvar))]
         first = N
         for lv in levels:  # each earlier level's new nodes hold a contiguous id range
             m = (ids >= first) & (ids < first + lv[0].shape[0])
@@ -314,11 +356,11 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
             first += lv[0].shape[0]
         n, K = ids.shape[0], g.sh_rest.shape[1] + 1
         out = [g.means.new_empty(n, 3), g.means.new_empty(n, 3, 3), g.means.new_empty(n), g.means.new_empty(n, K, 3),
-               g.means.new_empty(n)]
+               g.means.new_empty(n), g.means.new_empty(n)]
         for mask, local, src in parts:
             if not bool(mask.any()):
                 continue
-            for i in range(5):
+            for i in range(6):
                 if i == 3 and src[3] is None:  # leaf SH: DC and rest are stored apart
                     out[3][mask] = torch.cat([g.sh_dc[local, None], g.sh_rest[local]], 1)
                 else:
@@ -344,7 +386,7 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
         for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
             gi = group[a:b]
             parts.append(_merge(rows(kids[a:b]), gi - gi[0], int(gi[-1] - gi[0]) + 1))
-        levels.append(tuple(torch.cat([p[i] for p in parts]) for i in range(5)))
+        levels.append(tuple(torch.cat([p[0][i] for p in parts]) for i in range(6)) + (torch.cat([p[1] for p in parts]),))
         child_runs.append(kids)
         counts.append(size[multi])
         new_ids = torch.full_like(size, -1)
@@ -360,7 +402,8 @@ def build_hierarchy(gaussians: Gaussians, target_px: float = 1.0) -> GaussianHie
         radius=torch.cat([leaf_radius, cat(4, g.means.new_zeros(0))]),
         child_ptr=torch.cat([torch.zeros(1, dtype=torch.long), torch.cumsum(torch.cat(counts), 0)]) if counts
         else torch.zeros(1, dtype=torch.long),
-        child_ids=torch.cat(child_runs) if child_runs else torch.zeros(0, dtype=torch.long))
+        child_ids=torch.cat(child_runs) if child_runs else torch.zeros(0, dtype=torch.long),
+        lod_scale=torch.cat([g.means.new_ones(N), cat(6, g.means.new_zeros(0))]))
     return GaussianHierarchy(gaussians, nodes, target_px)
 
 

@@ -223,7 +223,7 @@ def _write_splats(path: Path, sp: "splats.SplatSet", S: np.ndarray, sh_degree: i
         quats=rotmat_to_quat(R).float(),
         opacity_logits=torch.from_numpy(sp.opacity_logits).float(),
         sh_dc=torch.from_numpy(sp.sh_dc).float(),
-        sh_rest=torch.zeros(len(sp.means), (sh_degree + 1) ** 2 - 1, 3),
+        sh_rest=torch.zeros(1, (sh_degree + 1) ** 2 - 1, 3).expand(len(sp.means), -1, -1),  # one zero row, not N
     )
     g.save(path)
 
