@@ -67,6 +67,8 @@ class RasterCache:
 
     def get(self, keys: list[str]) -> dict[str, np.ndarray]:
         """Rows `[P]` int32 of the goals found in memory or on disk (missing keys left out)."""
+        if _MEMORY.get(self.key) is not self._entry:  # dropped by another navmesh's trim while this one is in use
+            _MEMORY[self.key] = self._entry           # (many scenes in one process): held again, as the latest
         _MEMORY.move_to_end(self.key)
         rows = self._entry["rows"]
         out = {k: rows[k] for k in keys if k in rows}

@@ -35,6 +35,13 @@ def _group_defaults(primary: str) -> set[str]:
     return out
 
 
+def _absolute_defaults(path: Path) -> list[Path]:
+    """The option files an exp pulls in by absolute path (`- /env/termination@env.termination: paper`)."""
+    d = yaml.safe_load(path.read_text()) or {}
+    return [CONF / k.split("@")[0].lstrip("/") / f"{v}.yaml" for item in d.get("defaults", []) if isinstance(item, dict)
+            for k, v in item.items() if k.startswith("/")]
+
+
 def _compositions() -> list[tuple[str, list[str], list[Path]]]:
     """(primary, overrides, files it covers) for every option of every group a primary uses."""
     jobs = []
@@ -51,7 +58,8 @@ def _compositions() -> list[tuple[str, list[str], list[Path]]]:
         jobs.append(("study", [f"+study={opt.stem}"], [opt]))
         jobs.append(("study", [f"+study={opt.stem}", "debug=smoke"], [opt]))
     for e in EXPS:
-        jobs.append(("train", [f"+exp={e}"], [CONF / "exp" / f"{e}.yaml"]))
+        exp = CONF / "exp" / f"{e}.yaml"
+        jobs.append(("train", [f"+exp={e}"], [exp, *_absolute_defaults(exp)]))
         jobs.append(("train", [f"+exp={e}", "debug=smoke"], [CONF / "exp" / f"{e}.yaml"]))
     return jobs
 

@@ -19,6 +19,7 @@ unoverlapped first batch), and the mean collect / update seconds the trainer log
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import tempfile
@@ -47,12 +48,11 @@ class TimingLogger:
         pass
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--iterations", type=int, default=6)
-    ap.add_argument("overrides", nargs="*", help="extra train-config overrides (Hydra syntax)")
-    args = ap.parse_args()
-
+def timed_ppo(overrides: list[str], iterations: int, exp: str = "citywalker_rl") -> dict:
+    """`PPOTrainer.train` for `iterations` collector iterations of `+exp=<exp>` with `overrides`
+    (after the two fixed ones, `critic_warmup_iters=0` and `target_kl=null`); the collector is the config's
+    (`collector=ray collector.num_workers=N` gives Ray actors). Returns the wall time, the per-iteration
+    arrival stamps and logged scalars, the frames per batch, the overrides and the code's root."""
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
@@ -63,27 +63,37 @@ def main() -> None:
     from wanderland_nav.rl.ppo import PPOTrainer
 
     root = Path(wanderland_nav.__file__).resolve().parents[1]
-    frames = 800 * args.iterations
-    overrides = ["+exp=citywalker_rl", "progress=false", f"algo.ppo.total_frames={frames}",
-                 "algo.ppo.critic_warmup_iters=0", "algo.ppo.target_kl=null",
-                 f"run_dir={tempfile.mkdtemp(prefix='bench_ppo_')}", *args.overrides]
+    overrides = [f"+exp={exp}", "progress=false", "algo.ppo.critic_warmup_iters=0", "algo.ppo.target_kl=null",
+                 f"run_dir={tempfile.mkdtemp(prefix='bench_ppo_')}", *overrides]
     with initialize_config_dir(config_dir=str(root / "conf"), version_base="1.3"):
         cfg = compose("train", overrides=overrides)
     c = typed_config(cfg, TrainConfig)
     recipe, _ = training_recipe(c, OmegaConf.to_container(cfg, resolve=True))
+    ppo = dataclasses.replace(recipe.ppo, total_frames=recipe.ppo.frames_per_batch * iterations)
     log = TimingLogger()
-    trainer = PPOTrainer(recipe.policy, recipe.env_fn, recipe.ppo, logger=log, checkpointer=None,
-                         num_workers=recipe.num_workers, seed=recipe.seed, progress=False,
+    trainer = PPOTrainer(recipe.policy, recipe.env_fn, ppo, logger=log, checkpointer=None,
+                         num_workers=recipe.num_workers, ray=recipe.ray, seed=recipe.seed, progress=False,
                          kinematics=recipe.kinematics)
     t0 = time.perf_counter()
     trainer.train()
-    wall = time.perf_counter() - t0
-    n = len(log.stamps)
-    per_iter = recipe.ppo.frames_per_batch
-    steady = (n - 1) * per_iter / (log.stamps[-1] - log.stamps[0]) if n > 1 else float("nan")
-    mean = lambda k: sum(r[k] for r in log.rows) / n  # noqa: E731
-    print(f"code: {root} | torch threads {torch.get_num_threads()} | cores {os.cpu_count()} | "
-          f"overrides: {' '.join(overrides[3:5] + list(args.overrides))}")
+    recipe.evaluator.close()
+    return {"wall": time.perf_counter() - t0, "stamps": log.stamps, "rows": log.rows, "t0": t0,
+            "frames_per_batch": ppo.frames_per_batch, "overrides": overrides[2:], "root": root}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--iterations", type=int, default=6)
+    ap.add_argument("--exp", default="citywalker_rl", help="the experiment whose PPO phase is timed")
+    ap.add_argument("overrides", nargs="*", help="extra train-config overrides (Hydra syntax)")
+    args = ap.parse_args()
+    r = timed_ppo(list(args.overrides), args.iterations, args.exp)
+    stamps, rows, wall, per_iter = r["stamps"], r["rows"], r["wall"], r["frames_per_batch"]
+    n = len(stamps)
+    steady = (n - 1) * per_iter / (stamps[-1] - stamps[0]) if n > 1 else float("nan")
+    mean = lambda k: sum(row[k] for row in rows) / n  # noqa: E731
+    print(f"code: {r['root']} | torch threads {torch.get_num_threads()} | cores {os.cpu_count()} | "
+          f"overrides: {' '.join(r['overrides'][:2] + list(args.overrides))}")
     print(f"iterations {n} x {per_iter} frames | loop {n * per_iter / wall:.1f} frames/s (wall {wall:.1f} s, "
           f"with collector start) | steady {steady:.1f} frames/s (iterations 2..{n}) | mean collect "
           f"{mean('time/collect_s'):.2f} s, update {mean('time/update_s'):.2f} s per iteration")

@@ -141,3 +141,23 @@ def test_a_damaged_pairs_file_is_a_miss_rebuilt_and_named(tmp_path, caplog, dama
     np.testing.assert_array_equal(again.source, reference.source)
     assert f"{pairs}: unreadable raster cache" in caplog.text and "rebuilding it" in caplog.text
     assert pairs.read_bytes() == good  # replaced by the rebuilt one
+
+
+def test_a_navmesh_dropped_by_another_trim_is_held_again_on_its_next_get(monkeypatch):
+    """Many scenes in one process (a scene set's BC env): a second navmesh's rows push the first one's entry out
+    of the memory budget while the first env still looks up goals; its next `get` returns its rows (it raised
+    KeyError) and the entry is the most recent again."""
+    from types import SimpleNamespace
+
+    import planners.raster_cache as rc
+
+    clear_memory()
+    monkeypatch.setattr(rc, "MEMORY_BUDGET", 1000)
+    a, b = rc.RasterCache(SimpleNamespace(content_hash="a" * 16), 100), rc.RasterCache(SimpleNamespace(content_hash="b" * 16), 100)
+    a.put(["g0"], [np.arange(100, dtype=np.int32)])  # 400 bytes
+    b.put(["g1", "g2"], [np.zeros(100, np.int32), np.ones(100, np.int32)])  # 1200 bytes in all: a is dropped
+    assert list(rc._MEMORY) == [b.key]
+    got = a.get(["g0"])
+    assert list(got) == ["g0"] and np.array_equal(got["g0"], np.arange(100))
+    assert next(reversed(rc._MEMORY)) == a.key
+    clear_memory()
