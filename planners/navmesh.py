@@ -27,14 +27,14 @@ import torch
 from planners.atomic import atomic_path
 from planners.frames import nav_from_scene_rotation
 from planners.heightfield import build_compact
-from planners.polygons import build_trimesh
+from planners.polygons import build_trimesh, island_is_simple
 from planners.fields import GeodesicField
 from planners.motion import move_along_surface
 from planners.path import find_path, geodesic_distance
 from planners.settings import FORMAT_VERSION, NavMeshFileError, NavMeshSettings, OffMeshError
 from planners.threads import single_thread
 from planners.visibility import VisPolys, Walls, build_graph, node_triangles, offset_nodes
-from planners.walk import closest_point_on_tris, point_in_tri
+from planners.walk import closest_point_on_tris, edge_lines, point_in_tri
 
 SNAP_INSET = 1e-4  # m: snapped points move this far into their triangle (clear of walls for visibility tests)
 
@@ -255,7 +255,7 @@ class NavMesh:
             coef = np.zeros((0, 3))
         self._t["tri_plane"] = torch.from_numpy(coef)
         self._tri_plane_np = coef
-        self._edge_lin = _edge_lines(a)
+        self._edge_lin = edge_lines(a)
         self._t["node_z"] = (self.surface_z(self._t["node_tri"], self._t["node_xy"]) if len(self.node_xy)
                              else torch.zeros(0, dtype=torch.float64))
         self.node_z_np = self._t["node_z"].numpy()
@@ -587,23 +587,6 @@ class NavMesh:
         return (f"NavMesh(up={self.up_axis}, grid={self.width}x{self.height}, spans={len(self.span_col)}, "
                 f"triangles={len(self.tris)}, corners={len(self.node_xy)}, islands={len(self.islands)}, "
                 f"area={self.area:.1f} m^2)")
-
-
-def _edge_lines(tri_xy: np.ndarray) -> np.ndarray:
-    """`[T,3,3]` per triangle edge k (vertex k -> k+1) the coefficients (a, b, c) of the signed
-    distance `a x + b y + c` of a point to it, positive inside (counter-clockwise triangles)."""
-    u, w = tri_xy, np.roll(tri_xy, -1, axis=1)
-    e = w - u
-    n = np.sqrt((e ** 2).sum(-1)).clip(1e-30)
-    a, b = -e[..., 1] / n, e[..., 0] / n
-    return np.stack([a, b, -(a * u[..., 0] + b * u[..., 1])], -1)
-
-
-def island_is_simple(region_island: np.ndarray) -> np.ndarray:
-    """Per island: True when it is one region, i.e. one 2D polygon without overlapping levels."""
-    if len(region_island) == 0:
-        return np.zeros(0, bool)
-    return np.bincount(region_island, minlength=int(region_island.max()) + 1) == 1
 
 
 def cache_key(mesh, settings: NavMeshSettings) -> str:

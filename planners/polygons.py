@@ -495,3 +495,10 @@ def _adjacency(tris, tri_region, verts_xy, labels) -> np.ndarray:
         else:
             portal[k] = e
     return nbr
+
+
+def island_is_simple(region_island: np.ndarray) -> np.ndarray:
+    """Per island: True when it is one region, i.e. one 2D polygon without overlapping levels."""
+    if len(region_island) == 0:
+        return np.zeros(0, bool)
+    return np.bincount(region_island, minlength=int(region_island.max()) + 1) == 1

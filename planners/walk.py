@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 
@@ -126,3 +127,13 @@ def closest_point_on_tris(tri_xy: torch.Tensor, pts: torch.Tensor) -> torch.Tens
     o = _cross(ex, ey, P[..., 0] - U[..., 0], P[..., 1] - U[..., 1])
     inside = (o >= 0).all(-1)
     return torch.where(inside[..., None], pts[:, None, :].expand_as(best), best)
+
+
+def edge_lines(tri_xy: np.ndarray) -> np.ndarray:
+    """`[T,3,3]` per triangle edge k (vertex k -> k+1) the coefficients (a, b, c) of the signed
+    distance `a x + b y + c` of a point to it, positive inside (counter-clockwise triangles)."""
+    u, w = tri_xy, np.roll(tri_xy, -1, axis=1)
+    e = w - u
+    n = np.sqrt((e ** 2).sum(-1)).clip(1e-30)
+    a, b = -e[..., 1] / n, e[..., 0] / n
+    return np.stack([a, b, -(a * u[..., 0] + b * u[..., 1])], -1)

@@ -11,6 +11,7 @@ fisheye (equidistant, `r = f * theta`, gsplat's fisheye model): `f = (W/2) / (hf
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from typing import Callable
@@ -20,7 +21,7 @@ import torch
 
 from wanderland_nav.envs.config import CameraConfig
 from wanderland_nav.geometry import agent_camera_poses, invert_rigid, pinhole_intrinsics
-from planners.threads import intra_op_threads
+from planners.threads import intra_op_threads, single_thread
 from wanderland_nav.render import fused
 from wanderland_nav.render.shards import map_single_threaded
 
@@ -170,3 +171,26 @@ class AgentCamera:
         if depth is not None:
             d = out.depth if out.depth is not None else torch.zeros(e - s, H, W, 1, device=self.device)
             depth[s:e] = torch.nan_to_num(d.float(), nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def one_intra_op_thread(method):
+    """Run an env call, TorchRL's bookkeeping included, on one intra-op thread: apart from rendering, all
+    its work is small `[B]` / `[B, T, H, W, 3]` tensor ops, which a thread pool only slows down, and on
+    a loaded machine by milliseconds per op (`planners/threads.py`). The camera's render groups run on
+    their own threads (`AgentCamera.workers`: one intra-op thread each; a compiled or GPU backend gets the
+    caller's intra-op count back, `AgentCamera.caller_threads`). Measured in
+    `experiments/env/README.md`. Nested entry points (`step_and_maybe_reset`
+    calls `step`) keep the outermost caller's count."""
+
+    @functools.wraps(method)
+    def run(self, *args, **kwargs):
+        if torch.get_num_threads() == 1 and self.camera.caller_threads is not None:  # nested, or a 1-thread caller
+            return method(self, *args, **kwargs)
+        self.camera.caller_threads = torch.get_num_threads()
+        try:
+            with single_thread():
+                return method(self, *args, **kwargs)
+        finally:
+            self.camera.caller_threads = None
+
+    return run

@@ -31,7 +31,6 @@ may be kept by a rollout, and must not change afterwards.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import time
 import warnings
@@ -42,47 +41,22 @@ from typing import Sequence
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from planners.threads import single_thread
-
 from wanderland_nav import keys
-from wanderland_nav.envs.camera import AgentCamera, Renderer
+from wanderland_nav.envs.camera import AgentCamera, Renderer, one_intra_op_thread
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import build_episode_table
 from wanderland_nav.envs.kinematics import finite_actions, plan_motion
 from wanderland_nav.envs.rewards import ProgressState, navigation_reward, terminations, update_progress
 from wanderland_nav.envs.experts import ExpertPolicy
 from wanderland_nav.envs.pedestrians.component import make_pedestrians
+from wanderland_nav.envs.specs import nav_env_specs
 from wanderland_nav.evaluation.metrics import INTERVENTION_CAUSES, EpisodeMetrics, spl
 from wanderland_nav.geometry import wrap_angle, world_to_body_2d
 from wanderland_nav.render import render
 
 log = logging.getLogger(__name__)
-
-
-def _one_intra_op_thread(method):
-    """Run an env call, TorchRL's bookkeeping included, on one intra-op thread: apart from rendering, all
-    its work is small `[B]` / `[B, T, H, W, 3]` tensor ops, which a thread pool only slows down, and on
-    a loaded machine by milliseconds per op (`planners/threads.py`). The camera's render groups run on
-    their own threads (`AgentCamera.workers`: one intra-op thread each; a compiled or GPU backend gets the
-    caller's intra-op count back, `AgentCamera.caller_threads`). Measured in
-    `experiments/env/README.md`. Nested entry points (`step_and_maybe_reset`
-    calls `step`) keep the outermost caller's count."""
-
-    @functools.wraps(method)
-    def run(self, *args, **kwargs):
-        if torch.get_num_threads() == 1 and self.camera.caller_threads is not None:  # nested, or a 1-thread caller
-            return method(self, *args, **kwargs)
-        self.camera.caller_threads = torch.get_num_threads()
-        try:
-            with single_thread():
-                return method(self, *args, **kwargs)
-        finally:
-            self.camera.caller_threads = None
-
-    return run
 
 
 def _moved(value, device):
@@ -122,9 +96,9 @@ class NavEnv(EnvBase):
 
     batch_locked = True
     # TorchRL's entry points, its own bookkeeping included (tensordict copies, `where` on resets)
-    step = _one_intra_op_thread(EnvBase.step)
-    reset = _one_intra_op_thread(EnvBase.reset)
-    step_and_maybe_reset = _one_intra_op_thread(EnvBase.step_and_maybe_reset)
+    step = one_intra_op_thread(EnvBase.step)
+    reset = one_intra_op_thread(EnvBase.reset)
+    step_and_maybe_reset = one_intra_op_thread(EnvBase.step_and_maybe_reset)
 
     def __init__(
         self,
@@ -227,54 +201,7 @@ class NavEnv(EnvBase):
         return self._has_goal_image
 
     def _make_specs(self) -> None:
-        B, c, k = self.batch_size, self.config.camera, self.config.kinematics
-        T, H, W, L = c.history, c.height, c.width, self.config.instruction_length
-        dev = self.device
-        f32 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.float32, device=dev)  # noqa: E731
-        i64 = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.int64, device=dev)  # noqa: E731
-        flag = lambda: Categorical(2, shape=(*B, 1), dtype=torch.bool, device=dev)  # noqa: E731
-        # uint8 images as Unbounded: a Bounded spec would hold full-size low/high tensors (B*T*H*W*3 each)
-        img = lambda *s: Unbounded(shape=(*B, *s), dtype=torch.uint8, device=dev)  # noqa: E731
-        obs = {keys.PAST_POSITIONS: f32(T, 2), keys.GOAL_VECTOR: f32(2), keys.GOAL_POSE: f32(4)}
-        if self.carries_instruction:
-            obs[keys.INSTRUCTION_TOKENS] = i64(L)
-        if self.carries_frames:
-            obs[keys.RGB] = img(T, H, W, 3)
-            if c.depth:
-                obs[keys.DEPTH] = f32(T, H, W, 1)
-        if self.carries_goal_views:
-            obs.update({keys.GOAL_IMAGE: img(H, W, 3), keys.HAS_GOAL_IMAGE: flag()})
-        if self.config.pixels:
-            obs[keys.PIXELS] = img(H, W, 3)
-        if self.config.privileged:  # ground truth no policy may read: nested under keys.PRIVILEGED by the keys
-            obs.update({keys.EPISODE_INDEX: i64(1), keys.STEP_COUNT: i64(1), keys.AGENT_POSITION: f32(3),
-                        keys.AGENT_YAW: f32(1), keys.DISTANCE_TO_GOAL: f32(1), keys.SUCCESS: flag(),
-                        keys.INTERVENTION: flag(), keys.COLLISION: flag()})
-        self.observation_spec = Composite(obs, shape=B, device=dev)
-        if k.action_mode == "waypoints":
-            r = k.waypoint_range
-            self.action_spec = Bounded(-r, r, shape=(*B, k.num_waypoints, 2), dtype=torch.float32, device=dev)
-        else:
-            low = torch.tensor([0.0, -k.max_angular_speed], device=dev).expand(*B, 2)
-            high = torch.tensor([k.max_linear_speed, k.max_angular_speed], device=dev).expand(*B, 2)
-            self.action_spec = Bounded(low.clone(), high.clone(), shape=(*B, 2), dtype=torch.float32, device=dev)
-        if self.expert is not None:
-            self.observation_spec[keys.EXPERT_ACTION] = Unbounded(shape=self.action_spec.shape, dtype=torch.float32,
-                                                                  device=dev)
-        # The episode metrics are step outputs beside the reward, no observation: in the reward spec they appear in
-        # ("next", "episode") only, never at a reset, and the env's step_mdp leaves them behind as it leaves the reward
-        # (in the done spec TorchRL would OR them into `done`; in the observation spec recipes feed them to policies)
-        rewards = {keys.REWARD: Unbounded(shape=(*B, 1), dtype=torch.float32, device=dev)}
-        if self.config.episode_metrics:
-            rewards.update({key: (flag() if key in (keys.EPISODE_SUCCESS, keys.EPISODE_INTERVENTION) else
-                                  i64(1) if key in (keys.EPISODE_STEPS, keys.EPISODE_COLLISIONS) else f32(1))
-                            for key in keys.EPISODE_KEYS})
-            rewards.update({key: i64(1) if key == keys.EPISODE_PERSON_COLLISIONS else f32(1)
-                            for key in self.pedestrians.episode_keys})
-        self.reward_spec = Composite(rewards, shape=B, device=dev)
-        self.done_spec = Composite(
-            {keys.DONE: flag(), keys.TERMINATED: flag(), keys.TRUNCATED: flag()}, shape=B, device=dev
-        )
+        self.observation_spec, self.action_spec, self.reward_spec, self.done_spec = nav_env_specs(self)
 
     def _init_state(self) -> None:
         B, c, dev = self.batch_size[0], self.config.camera, self.device
