@@ -8,7 +8,7 @@ Pérez-Higueras et al. 2018, SEAN 2.0 and SocNavBench; TTC as Karamouzas et al. 
 * `intimate_seconds`, `personal_seconds`, `social_seconds`: seconds with the nearest person in Hall's proxemic
   bands, [0, 0.45), [0.45, 1.2) and [1.2, 3.6) m, the distance taken from the robot's body edge to the person's
   centre (HuNavSim: centre distance minus the robot radius; below 0, inside the robot's body, is intimate too);
-  bands, so a step counts in one zone at most;
+  the bands do not overlap, so a step counts in one zone at most;
 * `min_person_distance`: the closest centre-to-centre distance to any person (m);
 * `min_time_to_collision`: the smallest time-to-collision over the episode's steps and people: the first
   time at which the two discs (radii summed) would touch if both kept the velocity of that step (robot: its
