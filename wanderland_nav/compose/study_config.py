@@ -105,12 +105,14 @@ class StudyGroup:
 
 @dataclass
 class SourceScene:
-    """The grounded scene every environment is built from: the demo block or a scene folder."""
+    """The grounded scene every environment is built from: the demo block, a generated district or a scene folder."""
 
     path: str = "data/scenes/demo"
-    demo: bool = True
-    demo_seed: int = 0
-    demo_preset: str = "tiny"
+    demo: bool = True  # generated on first use (`generator`); false: `path` is a scene folder
+    demo_seed: int = 0  # the generator's seed
+    demo_preset: str = "tiny"  # the demo block's preset
+    generator: str = "demo"  # demo (the block) | district (`conf/scene/district.yaml`)
+    size: str = "small"  # a district's size: small | paper
 
 
 @dataclass

@@ -70,7 +70,8 @@ class StudyCells:
             navigation = (typed_config(compose_config("train", list(self.c.study.train)), TrainConfig).navigation
                           if s.demo else None)
             self._source = scene_folder(SceneGroup(name="source", path=s.path, demo=s.demo, seed=s.demo_seed,
-                                                   preset=s.demo_preset), navigation=navigation).resolve()
+                                                   preset=s.demo_preset, generator=s.generator, size=s.size),
+                                        navigation=navigation).resolve()
         return self._source
 
     def env_path(self, env: str) -> Path:

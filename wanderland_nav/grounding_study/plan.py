@@ -151,6 +151,8 @@ def cell_inputs(c: StudyConfig, cell: Cell) -> dict:
                "bench": {"benchmark": s.task_families.benchmark, "exps": s.task_families.exps}}[cell.kind]
         return {**{k: list(v) for k, v in own.items()}, "overrides": list(s.part_overrides), "device": c.device}
     source = {"path": c.source.path, "demo": c.source.demo, "seed": c.source.demo_seed, "preset": c.source.demo_preset}
+    if c.source.demo and c.source.generator != "demo":  # a generated district (absent for the demo: old hashes hold)
+        source.update(generator=c.source.generator, size=c.source.size)
     if cell.kind == "build":
         return {"source": source, "spec": preset(cell.env, cell.seed).as_dict()}
     sampler = {"episode_sampler": dict(s.episode_sampler)} if s.episode_sampler else {}  # absent: old hashes hold
