@@ -10,7 +10,7 @@ import pytest
 from wanderland_nav.cache import Ledger
 from wanderland_nav.compose.cli import compose_config
 from wanderland_nav.compose.schema import study_config
-from wanderland_nav.grounding_study.parts import people_tables, plan_part_cells
+from wanderland_nav.grounding_study.parts import people_tables, plan_part_cells, task_family_tables
 from wanderland_nav.grounding_study.plan import MANIFEST, cell_digests, run_cells
 
 
@@ -141,6 +141,35 @@ def test_people_tables_pair_each_count_with_no_people_and_rl_with_bc(tmp_path):
     assert "-0.300" in row  # SR 0.7 - 1.0 over the same episodes
     social = text.split("social metrics with people")[1]
     assert "min_time_to_collision" in social and "intimate_seconds" in social and "BC @0" not in social
+
+
+def _bench_folder(folder, successes):
+    """A benchmark folder as its store leaves it: runs/<task>/<policy>.json and the ledger runs/done.json."""
+    ledger = {}
+    for job, ok in successes.items():
+        f = folder / "runs" / f"{job}.json"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        records = [{**r, "environment": "indoor" if i < 4 else "outdoor"} for i, r in enumerate(_records(ok, 0))]
+        f.write_text(json.dumps({"key": "k", "records": records}))
+        ledger[job] = {"hash": "k", "status": "done", "file": str(f)}
+    (folder / "runs" / "done.json").write_text(json.dumps(ledger))
+    return folder
+
+
+def test_task_family_tables_pool_the_seeds_and_pair_each_task_with_random_and_the_point_goal_policy(tmp_path):
+    seeds = {}
+    for seed in (0, 1):
+        seeds[seed] = _bench_folder(tmp_path / f"s{seed}", {
+            "pointgoal(route)/random": [False] * 10, "pointgoal(route)/citywalker_rl_bc": [True] * 9 + [False],
+            "imagegoal/random": [False] * 10, "imagegoal/nomad_imagegoal_rl_bc": [True] * 2 + [False] * 8})
+    text = task_family_tables(seeds)
+    pooled = text.split("## seeds 0, 1 pooled, indoor routes")[0]
+    row = next(line for line in pooled.splitlines() if line.startswith("imagegoal/nomad_imagegoal_rl_bc - pointgoal"))
+    assert "-0.700" in row  # SR 0.2 - 0.9 over the same 10 routes and 2 seeds
+    assert any(line.startswith("pointgoal(route)/citywalker_rl_bc - pointgoal(route)/random") for line in pooled.splitlines())
+    indoor = text.split("indoor routes")[1].split("## ")[0]
+    assert "over 4 episodes x 2 seeds" in indoor  # the 4 indoor routes of each seed
+    assert "outdoor routes" in text
 
 
 @pytest.mark.slow

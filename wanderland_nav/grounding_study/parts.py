@@ -166,6 +166,36 @@ def people_tables(names: list[str], seeds: Mapping[int, list[Path]]) -> str:
     return "\n\n".join(out)
 
 
+def bench_records(folder: Path) -> dict[str, list[dict]]:
+    """A `benchmark` folder -> `{"<task>/<policy>": records}` of every evaluation its store holds done."""
+    ledger = json.loads((folder / "runs" / "done.json").read_text())
+    return {job: json.loads(Path(e["file"]).read_text())["records"] for job, e in sorted(ledger.items())
+            if e.get("status") == "done"}
+
+
+def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random") -> str:
+    """The task families pooled over seeds: every `<task>/<policy>` evaluation the benchmark cells share, overall
+    and indoor / outdoor, each trained policy paired against `baseline` on its task and against the point-goal
+    policy (the main job's BC on the route task) over the same routes and seeds. `seeds`: seed -> benchmark folder."""
+    per_seed = {seed: bench_records(folder) for seed, folder in seeds.items()}
+    jobs = [j for j in next(iter(per_seed.values())) if all(j in recs for recs in per_seed.values())]
+    pointgoal = next((j for j in jobs if j.endswith(f"/{POINTGOAL_EXP}_bc")), None)
+    out = []
+    for group in ("overall", "indoor", "outdoor"):
+        def keep(records):
+            return records if group == "overall" else [r for r in records if r.get("environment") == group]
+        rows = {j: [keep(per_seed[s][j]) for s in seeds] for j in jobs}
+        rows = {j: v for j, v in rows.items() if all(v)}
+        if not rows:
+            continue
+        pairs = [(j, f"{j.split('/')[0]}/{baseline}") for j in rows
+                 if j.endswith("_bc") and f"{j.split('/')[0]}/{baseline}" in rows]
+        pairs += [(j, pointgoal) for j in rows if j.endswith("_bc") and pointgoal in rows and j != pointgoal]
+        out.append(f"## seeds {', '.join(map(str, seeds))} pooled, {group} routes\n\n"
+                   f"{seed_table(rows, None, TABLE_COLUMNS, pairs=pairs)}")
+    return "\n\n".join(out)
+
+
 def write_part_tables(c: StudyConfig, out: Path, parts: dict[str, list[Cell]], manifest: Ledger,
                       digests: dict[str, str], header: str) -> dict[str, Path]:
     """`<out>/<part>/table.txt` for every part with done cells (the cells not done are listed under the table)."""
@@ -184,8 +214,10 @@ def write_part_tables(c: StudyConfig, out: Path, parts: dict[str, list[Cell]], m
                     seeds.setdefault(cell.seed, []).append(done[cell.key])
             body = people_tables(list(PEOPLE_NAMES), seeds)
         elif part == "task_families":
-            body = "\n\n".join(f"## seed {cell.seed}\n\n" + (done[cell.key] / "table.txt").read_text()
-                               for cell in cells if cell.kind == "bench" and cell.key in done)
+            bench = {cell.seed: done[cell.key] for cell in cells if cell.kind == "bench" and cell.key in done}
+            body = "\n\n".join(([task_family_tables(bench)] if len(bench) > 1 else [])
+                                 + [f"## seed {seed}\n\n" + (folder / "table.txt").read_text()
+                                    for seed, folder in bench.items()])
         lines = [header, f"part {part}: {len(done)} of {len(cells)} cells done", "", body or "(no table yet)"]
         if missing:
             lines += ["", "cells not done: " + ", ".join(missing)]

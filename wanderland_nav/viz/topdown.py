@@ -19,7 +19,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from wanderland_nav.atomic import atomic_path
 
 
-def _navmesh_triangles_nav(navmesh, R_ns: np.ndarray) -> np.ndarray | None:
+def navmesh_triangles_nav(navmesh, R_ns: np.ndarray) -> np.ndarray | None:
     """`[T, 3, 3]` nav-frame triangles of the navmesh if the planner exposes them, else None."""
     for name in ("triangles", "triangles_scene"):
         tri = getattr(navmesh, name, None)
@@ -58,7 +58,7 @@ def plot_topdown(out_path: str | Path, *, nav_from_scene: np.ndarray, camera_cen
     fig, ax = plt.subplots(figsize=(8, 8))
     try:
         if navmesh is not None:
-            tri = _navmesh_triangles_nav(navmesh, R_ns)
+            tri = navmesh_triangles_nav(navmesh, R_ns)
             if tri is not None:
                 ax.add_collection(PolyCollection(tri[:, :, :2], facecolors="0.85", edgecolors="0.7",
                                                  linewidths=0.2, label="navmesh"))
