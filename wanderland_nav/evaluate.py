@@ -24,6 +24,7 @@ from wanderland_nav.compose.evaluating import reference
 from wanderland_nav.compose.scene import refuse_set
 from wanderland_nav.compose.scene_sets import scene_work
 from wanderland_nav.compose.schema import EvaluateConfig
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
 from wanderland_nav.evaluation import Evaluator
 from wanderland_nav.evaluation.loop import write_results
 
@@ -39,9 +40,10 @@ def run(cfg: DictConfig):
     out = Path(c.out) if c.out is not None else hydra_output_dir()
     split = c.split if c.split is not None else c.env.split
     if c.checkpoints:
+        crowd = c.env.pedestrians or PedestrianConfig(count=0)  # this command's (none without env/pedestrians=crowd)
         rows, results, table = compare_checkpoints(c.checkpoints, work, split=split, num_episodes=c.num_episodes,
                                                    batch_size=c.batch_size, device=c.device, seed=c.seed,
-                                                   progress=c.progress, pedestrians=c.env.pedestrians,
+                                                   progress=c.progress, pedestrians=crowd,
                                                    save_rollouts=c.save_rollouts, save_frames=c.save_frames)
         print(f"{work.label}: split {split}\n{table}", flush=True)
         if c.save_rollouts:

@@ -37,7 +37,7 @@ def compare_checkpoints(paths, work: SceneWork, *, split: str | None, num_episod
                         pedestrians=None, save_rollouts: str | Path | None = None, save_frames: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table), every checkpoint
     on each scene of `work` (`scene_sets.scene_work`; a set's result has rows overall, indoor/outdoor,
-    scene/<id>). `pedestrians` (a `PedestrianConfig`; None: each checkpoint's own) is the crowd every checkpoint
+    scene/<id>). `pedestrians` (a `PedestrianConfig`, `count: 0` for none; None: each checkpoint's own) is the crowd every checkpoint
     meets. `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
     `<folder>/<label>.npz` (`/` and `+` as `_`), for `python -m wanderland_nav.replay rollout=<file>`."""
     if not paths:
@@ -51,9 +51,9 @@ def compare_checkpoints(paths, work: SceneWork, *, split: str | None, num_episod
         policy = trained.policy
         env_cfg = shaped_env_config(trained.env, policy, trained.image_size)
         if pedestrians is not None:
-            if env_cfg.pedestrians.count != pedestrians.count:
-                log.info("%s: trained with %d pedestrians, evaluated with %d", path, env_cfg.pedestrians.count,
-                         pedestrians.count)
+            trained_count = env_cfg.pedestrians.count if env_cfg.pedestrians is not None else 0
+            if trained_count != pedestrians.count:
+                log.info("%s: trained with %d pedestrians, evaluated with %d", path, trained_count, pedestrians.count)
             env_cfg = replace(env_cfg, pedestrians=pedestrians)
         goal_kw = dict(goal_input=trained.goal_input, lookahead=trained.route_lookahead)  # as it was trained
         label = checkpoint_label(Path(path))
