@@ -13,7 +13,7 @@ import torch
 from wanderland_nav.compose.build import (check_policy_config, load_navmesh, make_logger, make_policy_from_config,
                                           shaped_env_config, single_scene_envs)
 from wanderland_nav.compose.checkpoints import policy_card
-from wanderland_nav.compose.episode_file import episodes_for_run, ppo_route_file
+from wanderland_nav.compose.episode_file import ppo_route_file, run_episodes_file
 from wanderland_nav.compose.identity import check_resume, run_identity
 from wanderland_nav.compose.policy_sources import released_weights
 from wanderland_nav.compose.scene import refuse_set
@@ -51,50 +51,6 @@ def checked_run_dir(run_dir: Path, identity: dict) -> Path:
     return run_dir
 
 
-def _run_episodes(c: TrainConfig, scene) -> Path:
-    """A single scene's episodes file when `episodes.path` is unset: `episodes.num` is honoured (the scene's file
-    when it matches, else a generated sibling file)."""
-    own = scene.episodes_path if scene.episodes_path is not None else scene.products / "episodes.json"
-    scene.episodes_path = episodes_for_run(scene, Path(own), num=c.episodes.num, seed=c.episodes.seed,
-                                           splits=tuple(c.episodes.splits), goal_images=c.episodes.goal_images)
-    return scene.episodes_path
-
-
-def _single_scene_envs(c: TrainConfig, work: SceneWork, goal: dict):
-    """env_cfg -> (eval scenes, env_fn, bc_env_fn) on one scene: BC on its episodes file, PPO also on
-    `episodes.ppo_routes` more routes."""
-    scene = work.first()
-    episodes_path = work.episodes[scene.name]
-    ppo_files = [episodes_path]  # PPO's routes: the file's train split, and episodes.ppo_routes more (BC keeps the file's)
-    if c.episodes.ppo_routes:
-        ppo_files.append(ppo_route_file(scene, episodes_path, num=c.episodes.ppo_routes, seed=c.episodes.ppo_routes_seed,
-                                        base_seed=c.episodes.seed, goal_images=c.episodes.goal_images))
-    return partial(single_scene_envs, scene, episodes_path, ppo_files, navmesh=load_navmesh(scene),
-                   lod_px=c.render.lod_px, seed=c.seed, device=c.device, eval_split=c.eval.split,
-                   eval_batch_size=c.eval.batch_size, train_split=c.train_env.split,
-                   train_batch_size=c.train_env.batch_size, goal=goal)
-
-
-def _scene_set_envs(c: TrainConfig, work: SceneWork, goal: dict):
-    """env_cfg -> (eval scenes, env_fn, bc_env_fn) over a set: every ready scene for BC and PPO (a
-    `MultiSceneNavEnv` each; BC's with global episode indices for its expert labels), evaluated per scene."""
-    return partial(scene_set_envs, work.folders, device=c.device, lod_px=c.render.lod_px, seed=c.seed,
-                   eval_split=c.eval.split, eval_batch_size=c.eval.batch_size, train_split=c.train_env.split,
-                   train_batch_size=c.train_env.batch_size, num_active=work.settings.num_active,
-                   memory_budget_gb=work.settings.memory_budget_gb, goal=goal)
-
-
-def scene_work_for_training(c: TrainConfig) -> SceneWork:
-    """The scenes `train` works on (`scene_work`): a single scene's episodes by `_run_episodes` unless
-    `episodes.path`; a set refuses `episodes.ppo_routes` (each scene trains on its own train split)."""
-    if c.episodes.ppo_routes:
-        refuse_set(c.scene, f"episodes.ppo_routes={c.episodes.ppo_routes}: extra PPO routes are drawn for a single "
-                            "scene; a set trains on every scene's own train split, set episodes.ppo_routes=0")
-    return scene_work(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
-                      goal_images=c.episodes.goal_images, episodes=c.episodes.path, episodes_key="episodes.path",
-                      episodes_for=partial(_run_episodes, c))
-
-
 def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, SceneWork]:
     """(Recipe, the scenes it trains on). `config`: the resolved config as a plain dict
     (stored in checkpoints). Read top-down: this module's own reading of the config, the scene prepared (down
@@ -104,10 +60,28 @@ def training_recipe(c: TrainConfig, config: dict) -> tuple[Recipe, SceneWork]:
         torch.set_num_threads(c.threads)
     check_policy_config(c.policy)  # a policy.* typo fails here, before any scene work
     ray = ray_options(c.collector)
-    work = scene_work_for_training(c)
-    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
-    envs = (_scene_set_envs if work.per_scene else _single_scene_envs)(c, work, goal)
+    ep = c.episodes  # a single scene's file by `episodes.num` unless `episodes.path`; a set: each scene's own
+    if ep.ppo_routes:
+        refuse_set(c.scene, f"episodes.ppo_routes={ep.ppo_routes}: extra PPO routes are drawn for a single scene; a "
+                            "set trains on every scene's own train split, set episodes.ppo_routes=0")
+    work = scene_work(c.scene, c.navigation, num_episodes=ep.num, seed=ep.seed, goal_images=ep.goal_images,
+                      episodes=ep.path, episodes_key="episodes.path",
+                      episodes_for=partial(run_episodes_file, num=ep.num, seed=ep.seed, splits=ep.splits,
+                                           goal_images=ep.goal_images))
     scene = work.first()
+    goal = dict(goal_input=c.goal_input, lookahead=c.route_lookahead)  # what the policy is told the goal is
+    sizes = dict(lod_px=c.render.lod_px, seed=c.seed, device=c.device, eval_split=c.eval.split,
+                 eval_batch_size=c.eval.batch_size, train_split=c.train_env.split,
+                 train_batch_size=c.train_env.batch_size, goal=goal)
+    if work.per_scene:  # a set: BC and PPO on a `MultiSceneNavEnv` over every scene, evaluated per scene
+        envs = partial(scene_set_envs, work.folders, num_active=work.settings.num_active,
+                       memory_budget_gb=work.settings.memory_budget_gb, **sizes)
+    else:  # one scene: BC on its episodes file, PPO also on `episodes.ppo_routes` more routes
+        episodes_path = work.episodes[scene.name]
+        ppo_files = [episodes_path] + ([ppo_route_file(scene, episodes_path, num=ep.ppo_routes, seed=ep.ppo_routes_seed,
+                                                       base_seed=ep.seed, goal_images=ep.goal_images)]
+                                       if ep.ppo_routes else [])
+        envs = partial(single_scene_envs, scene, episodes_path, ppo_files, navmesh=load_navmesh(scene), **sizes)
     identity = run_identity(config, work.identity())
     run_dir = checked_run_dir(Path(c.run_dir) if c.run_dir else default_run_dir(c, identity), identity)
     policy = make_policy_from_config(c.policy, c.device)
