@@ -37,8 +37,8 @@ def compare_checkpoints(paths, work: SceneWork, *, split: str | None, num_episod
                         pedestrians=None, save_rollouts: str | Path | None = None, save_frames: bool = False):
     """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table), every checkpoint
     on each scene of `work` (`scene_sets.scene_work`; a set's result has rows overall, indoor/outdoor,
-    scene/<id>). `pedestrians` (a `PedestrianConfig`, `count: 0` for none; None: each checkpoint's own) is the crowd every checkpoint
-    meets. `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
+    scene/<id>). `pedestrians` (a `PedestrianConfig`, `count: 0` for none; None: each checkpoint's own) is the
+    crowd every checkpoint meets. `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
     `<folder>/<label>.npz` (`/` and `+` as `_`), for `python -m wanderland_nav.replay rollout=<file>`."""
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")

@@ -2,14 +2,13 @@
 
 `scene_work` is where every entry point's `scene` config becomes the scenes it works on: a single scene is a set
 of one, so `train`, `evaluate`, the benchmark and `make_env` iterate over the same `SceneWork` (scene ids,
-prepared folders, episodes files, made on demand) and read its one flag, `per_scene` (rows per scene, a
-set's training and batch jobs). A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes. `run_set_jobs` is `prepare` and
-`make_episodes` over a set: one job per scene (in parallel, resumably: `wanderland_nav/preparation/scene_set.py`)
-with the same `navigation` settings the single-scene commands compose, so a `navigation.*` override
-reaches every scene and is part of the done-manifest key. `ready_scene_set` prepares the scenes a
-`train` / `evaluate` run needs (episodes made only where there are none), and `scene_env_fn` is the
-picklable per-scene env factory that `rl/scene_sets.py` (multi-scene training) and `evaluation.Evaluator` (per-scene evaluation)
-and the collector workers call.
+prepared folders, episodes files, made on demand) and read its one flag, `per_scene` (rows per scene; what a
+set trains on). A `scene.set` block (`conf/scene/demo_set.yaml`) names many scenes. `run_set_jobs` is `prepare`
+and `make_episodes` over a set: one job per scene (in parallel, resumably: `wanderland_nav/preparation/scene_set.py`)
+with the same `navigation` settings the single-scene commands compose, so a `navigation.*` override reaches every
+scene and is part of the done-manifest key. `ready_scene_set` prepares the scenes a set's run needs (episodes
+made only where there are none), and `scene_env_fn` is the picklable per-scene env factory that `rl/scene_sets.py`
+(multi-scene training), the training's per-scene evaluation and the collector workers call.
 """
 
 from __future__ import annotations
