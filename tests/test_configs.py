@@ -35,6 +35,12 @@ def _group_defaults(primary: str) -> set[str]:
     return out
 
 
+def _null_default(group: str, sub: str) -> bool:
+    """Whether `conf/<group>/default.yaml` lists the option group `sub` as off (`- sub: null`)."""
+    d = yaml.safe_load((CONF / group / "default.yaml").read_text()) if (CONF / group / "default.yaml").is_file() else {}
+    return any(isinstance(i, dict) and sub in i and i[sub] is None for i in (d or {}).get("defaults", []))
+
+
 def _absolute_defaults(path: Path) -> list[Path]:
     """The option files an exp pulls in by absolute path (`- /env/termination@env.termination: paper`)."""
     d = yaml.safe_load(path.read_text()) or {}
@@ -53,6 +59,9 @@ def _compositions() -> list[tuple[str, list[str], list[Path]]]:
             for opt in sorted((CONF / group).glob("*.yaml")):
                 extra = ["scene.path=/data/some_scene"] if (group, opt.stem) == ("scene", "folder") else []
                 jobs.append((primary, [f"{group}={opt.stem}", *extra], [opt]))
+                for sub in sorted(q for q in (CONF / group).iterdir() if q.is_dir() and _null_default(group, q.name)):
+                    jobs += [(primary, [f"{group}/{sub.name}={o.stem}"], [o]) for o in sorted(sub.glob("*.yaml"))
+                             if opt.stem == "default"]  # an option group off by default (`- pedestrians: null`)
         jobs.append((primary, ["debug=smoke"], [CONF / "debug_sizes" / f"smoke_{primary}.yaml"]))
     for opt in sorted((CONF / "study").glob("*.yaml")):  # `+study=<name>`: appended, not a default of study.yaml
         jobs.append(("study", [f"+study={opt.stem}"], [opt]))
@@ -283,8 +292,9 @@ def test_evaluate_compares_trained_checkpoints(demo_episodes, tmp_path):
 
 
 def test_checkpoints_meet_the_evaluations_pedestrians(demo_episodes, tmp_path):
-    """A checkpoint trained without people, evaluated with `env.pedestrians.count=3`: its episodes have people (the
-    crowd is the test's condition, not the checkpoint's), and the per-episode records are stored for pairing."""
+    """A checkpoint trained without people, evaluated with `env/pedestrians=crowd env.pedestrians.count=3`: its
+    episodes have people (the crowd is the test's condition, not the checkpoint's), and the per-episode records are
+    stored for pairing."""
     import json
 
     from wanderland_nav.evaluate import run as evaluate
@@ -294,7 +304,8 @@ def test_checkpoints_meet_the_evaluations_pedestrians(demo_episodes, tmp_path):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         ecfg = compose("evaluate", overrides=["scene=folder", f"scene.path={scene}", f"checkpoints=[{ck}]",
                                               "num_episodes=2", "batch_size=2", f"out={tmp_path}", "progress=false",
-                                              "navigation.collision.voxel_size=0.25", "env.pedestrians.count=3"])
+                                              "navigation.collision.voxel_size=0.25", "env/pedestrians=crowd",
+                                              "env.pedestrians.count=3"])
     row, = evaluate(ecfg).values()
     assert "person_collisions" in row and row["episodes"] == 2
     records, = json.loads((tmp_path / "eval_checkpoints.json").read_text())["records"].values()

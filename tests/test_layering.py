@@ -105,6 +105,21 @@ def test_table_names_only_existing_parts_and_paths():
             assert (REPO / p).exists(), f"{name}: {p} does not exist"
 
 
+#: the package root's library modules (ARCHITECTURE.md, "The package root"): the base parts and the Gymnasium facade
+ROOT_MODULES = {"keys", "geometry", "atomic", "errors", "cache", "gym"}
+
+
+def test_the_package_root_holds_entry_points_and_at_most_six_library_modules():
+    """A module at `wanderland_nav/` is an entry point (the `entry points` row) or one of the named library modules;
+    anything else belongs in the part it serves."""
+    entry = set(PARTS["entry points"][0])
+    root = {f.relative_to(REPO).as_posix() for f in (REPO / "wanderland_nav").glob("*.py")}
+    root -= {"wanderland_nav/__init__.py"}
+    loose = {Path(r).stem for r in root - entry}
+    assert loose <= ROOT_MODULES, f"library modules loose at the package root: {sorted(loose - ROOT_MODULES)}"
+    assert len(ROOT_MODULES) <= 6 and all(f"wanderland_nav/{m}.py" in root for m in ROOT_MODULES)
+
+
 @pytest.mark.parametrize("part", sorted(PARTS))
 def test_part_imports_only_what_its_row_allows(part):
     files = _files(part)

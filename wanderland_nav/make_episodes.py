@@ -25,6 +25,7 @@ from omegaconf import DictConfig
 
 from wanderland_nav.compose import scene_overrides, typed_config
 from wanderland_nav.compose.episode_sets import process_scene, resolve_scenes
+from wanderland_nav.compose.scene import names_set
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import MakeEpisodesConfig
 
@@ -38,7 +39,7 @@ def _worker(args):
 def run(cfg: DictConfig):
     """Everything `main` does, callable without Hydra's runtime (tests compose the config)."""
     c: MakeEpisodesConfig = typed_config(cfg, MakeEpisodesConfig)
-    if c.scene.set:
+    if names_set(c.scene):  # a set: its resumable batch jobs, one report row per scene
         if c.scenes or c.out is not None:
             raise ValueError(f"scene={c.scene.name} is a scene set: its episodes go beside each scene; "
                              "give no scene list and no out=")

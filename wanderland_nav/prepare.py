@@ -2,7 +2,7 @@
 
 Collision mesh and navmesh settings come from `conf/navigation/` (the group train, evaluate and
 make_episodes compose too); steps whose outputs are up to date are skipped (`preparation.scene`).
-A scene set (`scene=demo_set`, or any `scene.set`) is prepared scene by scene in parallel and resumably
+A scene set (`scene=demo_set`, or any `scene.set` block) is prepared scene by scene in parallel and resumably
 (`compose.scene_sets.run_set_jobs`): failed scenes are listed at the end and the exit status is 1.
 """
 
@@ -15,6 +15,7 @@ import time
 from omegaconf import DictConfig
 
 from wanderland_nav.compose import prepared_scene, typed_config
+from wanderland_nav.compose.scene import names_set
 from wanderland_nav.compose.scene_sets import run_set_jobs
 from wanderland_nav.compose.schema import PrepareConfig
 
@@ -28,7 +29,7 @@ def run(cfg: DictConfig):
     (a scene set: the `preparation.scene_set.BatchReport`)."""
     t0 = time.perf_counter()
     c: PrepareConfig = typed_config(cfg, PrepareConfig)
-    if c.scene.set:
+    if names_set(c.scene):  # a set: its resumable batch jobs, one report row per scene
         if not c.navmesh_enabled:
             raise ValueError("navmesh_enabled=false: a scene set is always prepared with its navmesh")
         return run_set_jobs(c.scene, c.navigation, generator=None, force=c.force, workers=c.workers)

@@ -32,7 +32,7 @@ def run(cfg: DictConfig) -> dict:
     c: TrainConfig = typed_config(cfg, TrainConfig)
     config = OmegaConf.to_container(cfg, resolve=True)
 
-    recipe, scene = training_recipe(c, config)
+    recipe, work = training_recipe(c, config)
     atomic_write_text(recipe.run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
     results, rows = run_recipe(recipe)
     shown = rows + [r + tag for tag in (SAMPLED, BLANK_CAMERA) for r in rows if r + tag in results]  # eval.*_rows
@@ -41,8 +41,7 @@ def run(cfg: DictConfig) -> dict:
         pairs = list(dict.fromkeys([(r, rows[0]) for r in rows[1:]] + pairs))
     table = comparison_table({r: results[r]["records"] for r in shown}, pairs=pairs)
     goal = f"goal input {c.goal_input}" + (f" {c.route_lookahead:g} m ahead" if c.goal_input == "route" else "")
-    where = f"set {c.scene.name}" if c.scene.set else scene.name
-    header = (f"{c.exp_name} | scene {where} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
+    header = (f"{c.exp_name} | scene {work.name} | eval split {c.eval.split} | {goal} | seed {c.seed} | "
               f"run {recipe.identity['hash'][:8]} | {time.perf_counter() - t_start:.0f}s")
     atomic_write_text(recipe.run_dir / "table.txt", header + "\n" + table + "\n")
     write_learning_curves(recipe.run_dir, {r: (results[r].get("frames", 0), row_estimates(results[r]["records"]))

@@ -59,11 +59,11 @@ def _train_and_eval(ex: StudyCells, env: str, seed: int, root: Path) -> Path:
 
 def _evaluate(ex: StudyCells, ckpt: Path, scene, episodes: Path, n: int, seed: int):
     """One checkpoint on the first `n` episodes of the study's eval split (the study's eval cells' call)."""
-    from wanderland_nav.compose.build import load_navmesh
     from wanderland_nav.compose.comparison import compare_checkpoints
+    from wanderland_nav.compose.scene_sets import SceneWork
 
     s = ex.c.study
-    _, results, _ = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
+    _, results, _ = compare_checkpoints([ckpt], SceneWork.of(scene, episodes), split=s.eval_split,
                                         num_episodes=n, batch_size=min(s.eval_batch_size, n), device=ex.c.device,
                                         seed=seed)
     return next(iter(results.values()))

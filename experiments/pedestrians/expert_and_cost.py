@@ -19,6 +19,7 @@ from planners import NavMesh
 from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
 from wanderland_nav.evaluation.loop import run_evaluation
 from wanderland_nav.envs.factory import make_nav_env
+from wanderland_nav.envs.pedestrians.config import PedestrianConfig
 from wanderland_nav.episodes import load_episodes
 from wanderland_nav.episodes.generate import write_scene_episodes
 from wanderland_nav.render.lod import load_splat
@@ -45,7 +46,7 @@ def config(count: int, camera: bool, res: int = 8) -> NavEnvConfig:
     c.camera.history = 1
     c.termination.max_steps = 300
     c.goal_image, c.observe_goal_image = "none", False
-    c.pedestrians.count = count
+    c.pedestrians = PedestrianConfig(count=count)
     return c
 
 

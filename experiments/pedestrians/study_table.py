@@ -4,7 +4,7 @@
         --seed 0 runs/eval_s0_n0 runs/eval_s0_n10 runs/eval_s0_n30 [--seed 1 runs/eval_s1_n0 ...]
 
 Each folder holds the `eval_checkpoints.json` that `python -m wanderland_nav.evaluate checkpoints=[...]
-env.pedestrians.count=N out=<folder>` writes (its checkpoints in the order of `--names`; a seed's folders may
+env/pedestrians=crowd env.pedestrians.count=N out=<folder>` writes (its checkpoints in the order of `--names`; a seed's folders may
 hold fewer checkpoints, only the first names then). Prints, as markdown-ready text: per seed set, NE / SR / SPL
 / IR and IR_pedestrian for every policy at every N with paired differences `N people - 0 people`, and the
 social metrics at N > 0; with several seeds, the policies every seed has, pooled (bootstrap over seeds and

@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from policies import make_policy
-from wanderland_nav.compose.build import load_navmesh
 from wanderland_nav.compose.checkpoints import card_of, policy_card, trained_policy
 from wanderland_nav.compose.comparison import compare_checkpoints
+from wanderland_nav.compose.scene_sets import SceneWork
 from wanderland_nav.rl.checkpoint import load_checkpoint, save_checkpoint
 from wanderland_nav.scene import load_scene
 
@@ -42,7 +42,7 @@ def test_a_card_and_an_older_checkpoint_evaluate_alike(prepared_demo_scene, demo
                           config=CONFIG)
     assert load_checkpoint(old)["card"] is None and card_of(load_checkpoint(old), old)["policy"] == CONFIG["policy"]
     scene = load_scene(prepared_demo_scene)
-    _, results, _ = compare_checkpoints([new, old], scene, demo_episodes, load_navmesh(scene), split=None,
+    _, results, _ = compare_checkpoints([new, old], SceneWork.of(scene, demo_episodes), split=None,
                                         num_episodes=4, batch_size=2)
     a, b = results.values()
     assert len(a.records) == 4 and a.records == b.records

@@ -38,7 +38,8 @@ def test_train_recipe_over_a_set_steps_and_clones_every_scene(linked_set, tmp_pa
     cfg = compose_config("train", ["+exp=citywalker_rl", "debug=smoke", "collector=ray", f"run_dir={tmp_path / 'run'}",
                                    "render.lod_px=4", *set_overrides(linked_set)])
     c = typed_config(cfg, TrainConfig)
-    recipe, scene = training_recipe(c, {"seed": 0})
+    recipe, work = training_recipe(c, {"seed": 0})
+    assert work.per_scene and list(work.folders) == ["a", "b"]
     assert recipe.evaluator.per_scene and list(recipe.evaluator.scenes) == ["a", "b"]
     assert sorted(recipe.identity["scene"]["scenes"]) == ["a", "b"]
     assert recipe.ray == {"address": None, "cpus_per_worker": 1.0, "memory_per_worker_gb": None,
@@ -90,3 +91,23 @@ def test_a_set_without_seeds_or_manifest_is_refused():
         scene_set_from_config(c.scene)
     with pytest.raises(ValueError, match="scene.set: give `root`"):
         set_root(SceneSetSettings())
+
+
+def test_one_scene_is_a_set_of_one_and_a_set_refuses_one_scenes_file(linked_set, demo_episodes):
+    """`scene_work`: the demo is one scene keyed by its name (rows not per scene); a set is its scenes, each with
+    its own episodes.json, and an episodes file naming one scene is refused with the setting named."""
+    from wanderland_nav.compose.scene_sets import scene_work
+
+    one = typed_config(compose_config("evaluate", ["debug=smoke", f"episodes={demo_episodes}"]), EvaluateConfig)
+    work = scene_work(one.scene, one.navigation, num_episodes=4, seed=0, goal_images=False, episodes=one.episodes)
+    assert not work.per_scene and list(work.episodes.values()) == [demo_episodes] and work.label == work.name
+    assert work.identity()["episodes_path"] == str(demo_episodes)
+
+    c = typed_config(compose_config("evaluate", ["debug=smoke", *set_overrides(linked_set)]), EvaluateConfig)
+    many = scene_work(c.scene, c.navigation, num_episodes=4, seed=0, goal_images=False)
+    assert many.per_scene and list(many.folders) == ["a", "b"]
+    assert many.episodes == {sid: linked_set / sid / "episodes.json" for sid in ("a", "b")}
+    assert many.label == "scene set demo_set (2 scenes: a, b)" and set(many.identity()["scenes"]) == {"a", "b"}
+    with pytest.raises(ValueError, match=r"episodes.path=x.json names one scene's file; a scene set uses each"):
+        scene_work(c.scene, c.navigation, num_episodes=4, seed=0, goal_images=False, episodes="x.json",
+                   episodes_key="episodes.path")

@@ -97,7 +97,8 @@ def test_body_gaussians_project_where_the_person_stands(demo):
     assert int(ys.min()) < top and int(ys.max()) > 31.5 + f * 0.75 / 4.0  # and the legs reach down near the feet
 
 
-def _env(demo, count=0, camera=False, B=2, episode_metrics=False, **ped):
+def _env(demo, count=None, camera=False, B=2, episode_metrics=False, **ped):
+    """A NavEnv on the demo with `count` people (None: no crowd block at all, the default)."""
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.envs.factory import make_nav_env
 
@@ -107,10 +108,8 @@ def _env(demo, count=0, camera=False, B=2, episode_metrics=False, **ped):
     c.camera.width = c.camera.height = 16
     c.camera.history = 1
     c.termination.max_steps = 40
-    c.pedestrians.count = count
+    c.pedestrians = PedestrianConfig(count=count, **ped) if count is not None else None
     c.episode_metrics = episode_metrics
-    for k, v in ped.items():
-        setattr(c.pedestrians, k, v)
     kw = {}
     if camera:
         from wanderland_nav.render import Gaussians
@@ -138,7 +137,7 @@ def _rollout(env, steps=12):
 def test_off_by_default_is_the_pedestrian_free_task_bit_for_bit(demo):
     from wanderland_nav.envs import NavEnvConfig
 
-    assert NavEnvConfig().pedestrians.count == 0
+    assert NavEnvConfig().pedestrians is None  # no crowd unless env/pedestrians=crowd selects one
     plain, off = _env(demo, camera=True), _env(demo, count=0, camera=True)
     assert off.crowd is None and set(off.observation_spec.keys(True)) == set(plain.observation_spec.keys(True))
     a, b = _rollout(plain), _rollout(off)

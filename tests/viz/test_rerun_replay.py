@@ -204,12 +204,12 @@ def test_replay_entry_point_rerenders_frames_and_expert_paths(recorded, demo, tm
 
 def test_rerun_logger_protocol(recorded, tmp_path):
     from wanderland_nav.compose import make_logger
-    from wanderland_nav.compose.schema import LoggerGroup
+    from wanderland_nav.compose.schema import LoggerGroup, RerunOptions
     from wanderland_nav.rl.loggers import Logger
     from wanderland_nav.viz.rerun_logger import scalar_entities
 
     env, _, ro, _ = recorded
-    lg = make_logger(LoggerGroup(kind="rerun", rollout_every=2, max_agents=1), tmp_path, env.scene)
+    lg = make_logger(LoggerGroup(kind="rerun", rerun=RerunOptions(rollout_every=2, max_agents=1)), tmp_path, env.scene)
     assert isinstance(lg, Logger)
     for i in range(3):
         lg.log_scalars({"losses/objective": 0.5 - 0.1 * i, "eval/SR": 0.25 * i, "eval/NE": float("nan"),

@@ -16,7 +16,6 @@ import io
 import logging
 import time
 from pathlib import Path
-from typing import Any
 
 from wanderland_nav import keys
 from wanderland_nav.atomic import atomic_write_json, atomic_write_text
@@ -28,14 +27,11 @@ from wanderland_nav.cache import json_digest
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians
 from wanderland_nav.compose.identity import scene_identity
 from wanderland_nav.compose.policy_sources import released_weights_policies
-from wanderland_nav.compose.scene import prepared_scene, scene_episodes
-from wanderland_nav.compose.scene_sets import ready_scene_set
+from wanderland_nav.compose.scene_sets import scene_work
 from wanderland_nav.compose.schema import BenchmarkConfig
-from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.evaluation import EvalScene, Evaluator
 from wanderland_nav.evaluation.tables import comparison_table, row_estimates
 from wanderland_nav.rl.route_goal import with_goal_input
-from wanderland_nav.scene import load_scene
 from wanderland_nav.viz.study_chart import write_study_chart
 
 log = logging.getLogger("wanderland_nav.benchmark")
@@ -133,23 +129,6 @@ def failure_lines(results: dict) -> list[str]:
     return lines
 
 
-def benchmark_scenes(c: BenchmarkConfig) -> tuple[str, list[tuple[str, Any, Path]]]:
-    """(header name, `[(scene_id, scene, episodes file)]`): the one scene, or every ready scene of `scene.set`
-    (prepared and given episodes on demand, as `train` and `evaluate` do), each with its own `episodes.json`."""
-    if not c.scene.set:
-        scene = prepared_scene(c.scene, c.navigation)
-        scene, episodes = scene_episodes(scene, c.episodes, num=c.demo_episodes, seed=c.seed,
-                                         generator=GeneratorSettings(goal_images=False))
-        return scene.name, [(scene.name, scene, episodes)]
-    if c.episodes is not None:
-        raise ValueError(f"benchmark: episodes={c.episodes} names one scene's file; scene set {c.scene.name!r} "
-                         f"evaluates each scene's own episodes.json")
-    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.demo_episodes, seed=c.seed, goal_images=False)
-    scenes = [(sid, load_scene(p)) for sid, p in paths.items()]
-    return (f"scene set {c.scene.name} ({len(scenes)} scenes: {', '.join(paths)})",
-            [(sid, s, s.products / "episodes.json") for sid, s in scenes])
-
-
 def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     """Every policy on every task it fits, on every scene; -> `{"table", "results", "rows", "skipped", "seconds"}`
     (also written to `out`: table.txt, results.csv, table.png, timing.json, runs/)."""
@@ -158,12 +137,14 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
     baseline = c.baseline or sources[0].name
     if baseline not in {s.name for s in sources}:
         raise ValueError(f"benchmark baseline={baseline!r}: not among the policies {[s.name for s in sources]}")
-    header, scenes = benchmark_scenes(c)
+    work = scene_work(c.scene, c.navigation, num_episodes=c.demo_episodes, seed=c.seed, goal_images=False,
+                      episodes=c.episodes)
+    header = work.label
     store = EvaluationStore(out)
-    parts = {sid: scene_identity(scene.root, episodes) for sid, scene, episodes in scenes}
+    parts = {sid: scene_identity(folder, work.episodes[sid]) for sid, folder in work.folders.items()}
 
     def job_key(source, task, sid) -> tuple[str, str]:
-        return (f"{task.label}/{source.name}" + (f"/{sid}" if c.scene.set else ""),
+        return (f"{task.label}/{source.name}" + (f"/{sid}" if work.per_scene else ""),
                 run_key(source, task, c, parts[sid]))
 
     for source in sources:  # a served policy's declaration from its stored evaluations, when they hold it
@@ -192,7 +173,8 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
             if not isinstance(source, ProtocolSource) or source.shaped_by() is not None:
                 source.env_config(task, c.env)  # a key the env would not carry: refused before any evaluation
             results[(task.label, source.name)] = []
-    for sid, scene, episodes in scenes:  # scene by scene: one scene's navmesh and splat loaded at a time
+    for sid in work.folders:  # scene by scene: one scene, its navmesh and splat loaded at a time
+        scene, episodes = work.scene(sid), work.episodes[sid]
         navmesh = load_navmesh(scene)
         for task in tasks:
             for source in sources:
@@ -220,9 +202,9 @@ def run_benchmark(c: BenchmarkConfig, out: Path) -> dict:
         results.pop((task_label, name), None)
         skipped.append(f"{task_label}/{name}: not finished, nothing of it stored ({cause}); rerun with the policy's "
                        "server reachable to finish it (the stored evaluations are reused)")
-    rows = grouped_rows(results, per_scene=len(scenes) > 1)
+    rows = grouped_rows(results, per_scene=len(work.folders) > 1)
     pairs = [(f"{t}/{n}", f"{t}/{baseline}") for (t, n) in results if n != baseline and (t, baseline) in results]
-    pooled = "" if len(scenes) == 1 else "; rows without a scene pool every scene's episodes"
+    pooled = "" if len(work.folders) == 1 else "; rows without a scene pool every scene's episodes"
     table = "\n".join([f"{header}: split {c.split}, success: {SUCCESS_RULE}{pooled}",
                        comparison_table({row_label(k): v for k, v in rows.items()}, pairs=pairs) if rows else
                        "no evaluation finished",

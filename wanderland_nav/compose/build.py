@@ -10,6 +10,7 @@ from pathlib import Path
 from planners import NavMesh
 from policies import make_policy, policy_config
 from wanderland_nav import keys
+from wanderland_nav.compose.schema import RerunOptions
 from wanderland_nav.envs.config import NavEnvConfig
 from wanderland_nav.envs.episode_table import load_goal_images
 from wanderland_nav.envs.factory import make_nav_env
@@ -131,8 +132,9 @@ def make_logger(logger_cfg, run_dir: Path, scene=None):
     if logger_cfg.kind in ("console", "csv"):
         return ConsoleCSVLogger(run_dir, print_every=logger_cfg.print_every)
     if logger_cfg.kind == "rerun":
-        return viz.RerunLogger(run_dir, rollout_every=logger_cfg.rollout_every, max_agents=logger_cfg.max_agents,
-                               spawn=logger_cfg.spawn, scene=scene)
+        r = logger_cfg.rerun if logger_cfg.rerun is not None else RerunOptions()
+        return viz.RerunLogger(run_dir, rollout_every=r.rollout_every, max_agents=r.max_agents, spawn=r.spawn,
+                               scene=scene)
     raise ValueError(f"logger.kind={logger_cfg.kind!r}: expected console or rerun")
 
 

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
-from functools import partial
 from pathlib import Path
 
 from wanderland_nav.atomic import atomic_write_json
-from wanderland_nav.compose.build import env_factory, scene_gaussians, shaped_env_config
+from wanderland_nav.compose.build import shaped_env_config
 from wanderland_nav.compose.checkpoints import trained_policy
-from wanderland_nav.compose.scene_sets import scene_env_fn
-from wanderland_nav.evaluation import EvalScene, Evaluator
+from wanderland_nav.compose.scene_sets import SceneWork
+from wanderland_nav.evaluation import Evaluator
 from wanderland_nav.evaluation.tables import comparison_table
-from wanderland_nav.rl.route_goal import GoalInputEnvFn
 
 log = logging.getLogger(__name__)
 
@@ -34,19 +32,17 @@ def checkpoint_label(path: Path) -> str:
     return "/".join(parts[-2:]) if parts else p.stem
 
 
-def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | None, num_episodes: int | None,
+def compare_checkpoints(paths, work: SceneWork, *, split: str | None, num_episodes: int | None,
                         batch_size: int, device: str = "cpu", seed: int = 0, progress: bool = False,
-                        scene_set: dict[str, str] | None = None, pedestrians=None,
-                        save_rollouts: str | Path | None = None, save_frames: bool = False):
-    """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table).
-    With `scene_set` (`{scene_id: folder}`, prepared) each checkpoint runs every scene's split instead
-    (`scene`, `episodes_path`, `navmesh` unused); its result has rows overall, indoor/outdoor, scene/<id>.
-    `pedestrians` (a `PedestrianConfig`; None: each checkpoint's own) is the crowd every checkpoint meets.
-    `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
+                        pedestrians=None, save_rollouts: str | Path | None = None, save_frames: bool = False):
+    """-> (rows {label: overall metrics}, results {label: EvaluationResult}, printable table), every checkpoint
+    on each scene of `work` (`scene_sets.scene_work`; a set's result has rows overall, indoor/outdoor,
+    scene/<id>). `pedestrians` (a `PedestrianConfig`, `count: 0` for none; None: each checkpoint's own) is the
+    crowd every checkpoint meets. `save_rollouts` (a folder, single scenes): every step of each checkpoint's evaluation in
     `<folder>/<label>.npz` (`/` and `+` as `_`), for `python -m wanderland_nav.replay rollout=<file>`."""
     if not paths:
         raise ValueError("compare_checkpoints: no checkpoints given")
-    if save_rollouts is not None and scene_set is not None:
+    if save_rollouts is not None and work.per_scene:
         raise ValueError("compare_checkpoints: save_rollouts records single scenes, not a scene set; "
                          "evaluate one scene of the set with scene=<folder>")
     rows, results = {}, {}
@@ -55,23 +51,17 @@ def compare_checkpoints(paths, scene, episodes_path, navmesh, *, split: str | No
         policy = trained.policy
         env_cfg = shaped_env_config(trained.env, policy, trained.image_size)
         if pedestrians is not None:
-            if env_cfg.pedestrians.count != pedestrians.count:
-                log.info("%s: trained with %d pedestrians, evaluated with %d", path, env_cfg.pedestrians.count,
-                         pedestrians.count)
+            trained_count = env_cfg.pedestrians.count if env_cfg.pedestrians is not None else 0
+            if trained_count != pedestrians.count:
+                log.info("%s: trained with %d pedestrians, evaluated with %d", path, trained_count, pedestrians.count)
             env_cfg = replace(env_cfg, pedestrians=pedestrians)
         goal_kw = dict(goal_input=trained.goal_input, lookahead=trained.route_lookahead)  # as it was trained
         label = checkpoint_label(Path(path))
         if label in rows:
             label = str(path)
-        if scene_set is not None:
-            envs = scene_env_fn(scene_set, env_cfg, split=split, device=device, lod_px=trained.lod_px)
-            scenes = {sid: EvalScene(make=partial(envs, sid, batch_size, seed)) for sid in scene_set}
-        else:
-            g = scene_gaussians(scene, trained.lod_px, needed=env_cfg.camera.enabled)
-            make = GoalInputEnvFn(env_factory(scene, episodes_path, env_cfg, split=split, batch_size=batch_size,
-                                              seed=seed, device=device, navmesh=navmesh, gaussians=g), **goal_kw)
-            scenes = {scene.name: EvalScene(make=make, episodes_path=episodes_path)}
-        res = Evaluator(scenes, per_scene=scene_set is not None, num_episodes=num_episodes, seed=seed,
+        scenes = work.eval_scenes(env_cfg, split=split, batch_size=batch_size, seed=seed, device=device,
+                                  lod_px=trained.lod_px, goal=goal_kw)
+        res = Evaluator(scenes, per_scene=work.per_scene, num_episodes=num_episodes, seed=seed,
                         progress=progress, rollouts=save_rollouts, frames=save_frames).evaluate(policy, label)
         rows[label], results[label] = res.summary["overall"], res
     table = comparison_table({k: r.records for k, r in results.items()}, baseline=next(iter(rows)))

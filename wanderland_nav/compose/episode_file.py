@@ -30,6 +30,15 @@ def split_counts(path: Path) -> dict[str, int]:
             for s in ("train", "val", "test")}
 
 
+def run_episodes_file(scene, *, num: int | None, seed: int, splits, goal_images: bool) -> Path:
+    """`train`'s episodes file for a single scene when `episodes.path` is unset (`episodes_for_run` over the scene's
+    own file: `episodes.num` is honoured); recorded on the scene."""
+    own = scene.episodes_path if scene.episodes_path is not None else scene.products / "episodes.json"
+    scene.episodes_path = episodes_for_run(scene, Path(own), num=num, seed=seed, splits=tuple(splits),
+                                           goal_images=goal_images)
+    return scene.episodes_path
+
+
 def episodes_for_run(scene, existing: Path | None, *, num: int | None, seed: int,
                      splits: tuple[float, float, float], goal_images: bool) -> Path:
     """`existing` when it matches `num` and `splits` (or `num` is None), else a generated sibling file.

@@ -61,11 +61,11 @@ def scene_identity(root, episodes_path=None, files: dict | None = None) -> dict:
 
 
 def identity_config(config: dict) -> dict:
-    """The resolved config without the cosmetic keys, and without `env.pedestrians` while its count is 0: off,
+    """The resolved config without the cosmetic keys, and without `env.pedestrians` while it is null or its count 0: off,
     the block changes nothing, so runs made before it existed keep their identity."""
     out = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
     env = out.get("env")
-    if isinstance(env, dict) and isinstance(env.get("pedestrians"), dict) and not env["pedestrians"].get("count"):
+    if isinstance(env, dict) and "pedestrians" in env and not (env["pedestrians"] or {}).get("count"):
         out["env"] = {k: v for k, v in env.items() if k != "pedestrians"}
     return out
 

@@ -9,7 +9,7 @@ the episodes name them (`build.env_factory`), and a policy-facing env: no privil
 episode metrics at done, `pixels` for video.
 
 A scene set (`scene="demo_set"`, or `scene.set.*` overrides) gives one env over all its scenes, prepared
-and given episodes in parallel and resumably as `train` does (`compose/scene_sets.py`).
+and given episodes in parallel and resumably as `train` does (`compose.scene_sets.scene_work`).
 
 Keyword overrides are spelled as on the command line, one per config key: `batch_size=8`,
 `debug="smoke"` (a group), `env={"camera": {"width": 64}}` (nested) or `**{"env.camera.width": 64}`.
@@ -23,10 +23,8 @@ import multiprocessing
 
 from wanderland_nav.compose.build import env_factory, load_navmesh, scene_gaussians, shaped_env_config
 from wanderland_nav.compose.cli import compose_config
-from wanderland_nav.compose.scene import prepared_scene, scene_episodes
-from wanderland_nav.compose.scene_sets import ready_scene_set, scene_env_fn
+from wanderland_nav.compose.scene_sets import scene_env_fn, scene_work
 from wanderland_nav.compose.schema import MakeEnvConfig, typed_config
-from wanderland_nav.episodes.generate import GeneratorSettings
 from wanderland_nav.rl.scene_sets import multi_scene_env_fn
 
 
@@ -95,26 +93,17 @@ def make_env(scene: str = "demo", *, policy=None, **overrides):
     c = make_env_config(scene, **overrides)
     seed = c.seed if c.seed is not None else process_seed()
     env_cfg = shaped_env_config(c.env, policy, c.render.image_size) if policy is not None else c.env
-    if c.scene.set is not None:
-        return _scene_set_env(c, env_cfg, seed)
-    loaded = prepared_scene(c.scene, c.navigation)
-    loaded, episodes_path = scene_episodes(loaded, c.episodes.path, num=c.episodes.num, seed=c.episodes.seed,
-                                           generator=_generator(c.episodes.goal_images))
+    work = scene_work(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
+                      goal_images=c.episodes.goal_images, episodes=c.episodes.path, episodes_key="episodes.path")
+    if work.per_scene:  # one env over the set's scenes, as `train` steps a set
+        scene_env = scene_env_fn(work.folders, env_cfg, split=None, device=c.device, lod_px=c.render.lod_px)
+        return multi_scene_env_fn(list(work.folders), scene_env, batch_size=c.batch_size,
+                                  num_active=work.settings.num_active, device=c.device,
+                                  memory_budget_gb=work.settings.memory_budget_gb, seed=seed)()
+    loaded = work.first()
     gaussians = scene_gaussians(loaded, c.render.lod_px, needed=env_cfg.camera.enabled)
-    return env_factory(loaded, episodes_path, env_cfg, split=None, batch_size=c.batch_size, seed=seed,
+    return env_factory(loaded, work.episodes[loaded.name], env_cfg, split=None, batch_size=c.batch_size, seed=seed,
                        device=c.device, navmesh=load_navmesh(loaded), gaussians=gaussians)()
-
-
-def _scene_set_env(c: MakeEnvConfig, env_cfg, seed: int):
-    """The set's scenes prepared with `c.navigation` (episodes made where a scene has none), as one env."""
-    if c.episodes.path is not None:
-        raise ValueError(f"episodes.path={c.episodes.path}: a scene set uses each scene's own episodes.json; "
-                         "leave episodes.path null")
-    paths = ready_scene_set(c.scene, c.navigation, num_episodes=c.episodes.num, seed=c.episodes.seed,
-                            goal_images=c.episodes.goal_images)
-    scene_env = scene_env_fn(paths, env_cfg, split=None, device=c.device, lod_px=c.render.lod_px)
-    return multi_scene_env_fn(list(paths), scene_env, batch_size=c.batch_size, num_active=c.scene.set.num_active,
-                              device=c.device, memory_budget_gb=c.scene.set.memory_budget_gb, seed=seed)()
 
 
 def process_seed() -> int:
@@ -126,7 +115,3 @@ def process_seed() -> int:
     if not identity:
         return 0
     return int.from_bytes(hashlib.sha256(repr(tuple(identity)).encode()).digest()[:4], "little")
-
-
-def _generator(goal_images: bool):
-    return GeneratorSettings(goal_images=goal_images)

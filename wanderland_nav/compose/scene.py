@@ -28,12 +28,9 @@ def scene_folder(scene: SceneGroup, navigation: NavigationGroup | None = None) -
     non-default demo preset gets its own folder beside the default one (`<path>_<preset>`), and so do `navigation`
     settings other than the default ones (`<path>_nav<hash8>`): a generated scene's collision mesh, navmesh and
     episodes are products of those settings, so `debug=smoke` (coarser voxels) and the main job each keep their own
-    beside the other instead of re-baking one folder in turn. A scene set is refused: the commands that take
-    one scene never quietly use a set's first scene."""
-    if scene.set is not None:
-        raise ValueError(f"scene={scene.name} is a scene set; this command takes one scene: pass scene=<folder> "
-                         f"(one of the set's, e.g. scene={scene.path}). prepare, make_episodes, train and evaluate "
-                         "take sets")
+    beside the other instead of re-baking one folder in turn. A scene set is refused (`refuse_set`): the
+    commands that take one scene never quietly use a set's first scene."""
+    refuse_set(scene)
     path = Path(scene.path)
     if scene.demo and scene.generator != "demo":  # a district: its folder is keyed by seed and size (conf/scene)
         path = Path(f"{path}{navigation_tag(navigation)}")
@@ -51,6 +48,21 @@ def scene_folder(scene: SceneGroup, navigation: NavigationGroup | None = None) -
     elif not is_scene_folder(path):
         raise FileNotFoundError(f"scene.path={path}: not a scene folder ({SCENE_LAYOUTS})")
     return path
+
+
+def names_set(scene: SceneGroup) -> bool:
+    """Whether `scene` names a scene set (its `set` block) rather than one scene: the one place this is asked
+    (`compose.scene_sets.scene_work` turns either into the scenes a command works on)."""
+    return scene.set is not None
+
+
+def refuse_set(scene: SceneGroup, what: str = "this command takes one scene") -> None:
+    """Raises for a scene set, naming it and what to pass instead (`export_usd`, `fit`, `replay`, and the features
+    that record one scene)."""
+    if names_set(scene):
+        raise ValueError(f"scene={scene.name} is a scene set; {what}: pass scene=<folder> (one of the set's, "
+                         f"e.g. scene={scene.path}). prepare, make_episodes, train, evaluate, benchmark and make_env "
+                         "take sets")
 
 
 def navigation_tag(navigation: NavigationGroup | None) -> str:

@@ -143,12 +143,19 @@ class AlgoGroup:
 
 
 @dataclass
+class RerunOptions:
+    """`logger.rerun` (`logger=rerun`): the rerun recording's throttles."""
+
+    rollout_every: int = at_least(0, 5)  # log every n-th eval rollout's renders (0: never)
+    max_agents: int = at_least(1, 2)  # agents of a rollout shown (their frames dominate the recording's size)
+    spawn: bool = False  # open the rerun viewer as well as writing rerun.rrd
+
+
+@dataclass
 class LoggerGroup:
     kind: str = "console"  # console | rerun
     print_every: int = at_least(1, 1)  # console
-    rollout_every: int = at_least(0, 5)  # rerun (0: never)
-    max_agents: int = at_least(1, 2)  # rerun
-    spawn: bool = False  # rerun
+    rerun: Optional[RerunOptions] = None  # the rerun recording's options (null unless logger=rerun)
 
 
 @dataclass

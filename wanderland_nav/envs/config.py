@@ -87,7 +87,7 @@ class NavEnvConfig:
     kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
-    pedestrians: PedestrianConfig = field(default_factory=PedestrianConfig)  # people on the navmesh; count 0: off
+    pedestrians: Optional[PedestrianConfig] = None  # people on the navmesh (null: none; `env/pedestrians=crowd`)
     episode_order: str = "sample"  # "sample": seeded random draws; "iterate": 0, 1, 2, ... (evaluation)
     split: str | None = None  # episodes.json split the factory loads (None: all)
     goal_image: str = "auto"  # "auto": load the episode's goal_image file; "render": render every goal view; "none"
@@ -143,7 +143,8 @@ class NavEnvConfig:
         for name, ok, value in checks:
             if not ok:
                 raise ValueError(f"NavEnvConfig.{name}: invalid value {value!r}")
-        self.pedestrians.validate()
+        if self.pedestrians is not None:
+            self.pedestrians.validate()
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -4,7 +4,7 @@
     result = evaluator.evaluate(policy, "BC", step)      # -> EvaluationResult (records, summary, table)
 
 A single scene is a set of one. What differs between "one scene" and "a scene set" is decided here and only
-here, by `per_scene` (the composition root sets it from `scene.set`): a set's records carry their `scene_id`,
+here, by `per_scene` (the composition root's `SceneWork.per_scene`): a set's records carry their `scene_id`,
 its summary and table get rows overall, indoor/outdoor and `scene/<id>` (`metrics.aggregate_by_scene`), and
 its rollouts are not recorded (a rollout file holds one scene); one scene's records are the env's as they are,
 with the interval table of `loop.interval_table`, recorded on request (`rollouts`, a logger that wants them).

@@ -21,13 +21,14 @@ import yaml
 from planners import NavMesh
 from wanderland_nav.atomic import atomic_write_json
 from wanderland_nav.cache import Ledger
-from wanderland_nav.compose.build import load_navmesh, make_policy_from_config
+from wanderland_nav.compose.build import make_policy_from_config
 from wanderland_nav.compose.checkpoints import policy_card
 from wanderland_nav.compose.cli import compose_config, resolved
 from wanderland_nav.compose.comparison import compare_checkpoints
 from wanderland_nav.compose.episode_file import episodes_for_run, split_counts
 from wanderland_nav.compose.identity import dotted_diff, identity_config
 from wanderland_nav.compose.scene import prepared_scene, scene_folder
+from wanderland_nav.compose.scene_sets import SceneWork
 from wanderland_nav.compose.schema import SceneGroup, TrainConfig, typed_config
 from wanderland_nav.compose.study_config import BC_ROUND, PROTOCOLS, StudyConfig
 from wanderland_nav.degrade import build_degraded_scene, preset
@@ -230,7 +231,7 @@ class StudyCells:
                 return {"episodes": 0, "routes": {k: v for k, v in routes.items() if k != "dropped_ids"}}
         else:
             n = _episodes_to_run(episodes, s.eval_split, s.eval_episodes)
-        _, results, table = compare_checkpoints([ckpt], scene, episodes, load_navmesh(scene), split=s.eval_split,
+        _, results, table = compare_checkpoints([ckpt], SceneWork.of(scene, episodes), split=s.eval_split,
                                                 num_episodes=n, batch_size=min(s.eval_batch_size, n),
                                                 device=self.c.device, seed=cell.seed)
         res = next(iter(results.values()))

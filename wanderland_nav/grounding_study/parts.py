@@ -5,7 +5,7 @@ Each cell is one entry point's command, composed here with `study.<part>` overri
 `study.part_overrides` (`debug=smoke` at the smoke size):
 
 * `main/grounded/seed<s>`: `train` + `study.main_job.train` + `seed=s` (BC, then PPO: the main job);
-* `people/people<N>/seed<s>`: `evaluate checkpoints=[<main>/bc.pt, <main>/last.pt] env.pedestrians.count=N`;
+* `people/people<N>/seed<s>`: `evaluate checkpoints=[<main>/bc.pt, <main>/last.pt] env/pedestrians=crowd env.pedestrians.count=N`;
 * `tasks/<exp>/seed<s>`: `train +exp=<exp>` + `study.task_families.train` (an image-goal or instruction policy);
 * `bench/grounded/seed<s>`: `benchmark` over the BC checkpoints of the main job and those runs, each on the tasks
   it fits, beside the expert, random and straight-line references.
@@ -99,6 +99,7 @@ class PartCells:
             ckpts = ",".join(str(self._checkpoint(main, f)) for f in ("bc.pt", "last.pt"))
             n = int(cell.env.removeprefix("people"))
             cfg = self._command("evaluate", [*s.pedestrians.evaluate, f"checkpoints=[{ckpts}]",
+                                             "env/pedestrians=crowd",
                                              f"env.pedestrians.count={n}", f"seed={cell.seed}"], folder, "out")
             rows = self.entries["evaluate"](cfg)
             return {"people": n, "rows": {k: {m: v[m] for m in ("SR", "IR") if m in v} for k, v in rows.items()}}

@@ -121,9 +121,9 @@ class Pedestrians(NoPedestrians):
         return self
 
 
-def make_pedestrians(cfg: PedestrianConfig, navmesh, nav_from_scene, starts_scene, batch: int, period: float,
+def make_pedestrians(cfg: PedestrianConfig | None, navmesh, nav_from_scene, starts_scene, batch: int, period: float,
                      device) -> NoPedestrians:
-    """`Pedestrians` when `cfg.count > 0`, else `NoPedestrians`."""
-    if not cfg.count:
+    """`Pedestrians` when `cfg` asks for people (`count > 0`), else `NoPedestrians`."""
+    if cfg is None or not cfg.count:
         return NoPedestrians()
     return Pedestrians(cfg, navmesh, nav_from_scene, starts_scene, batch, period, device)
