@@ -73,12 +73,26 @@ def _body(path: Path) -> dict:
     return {k: v for k, v in (yaml.safe_load(path.read_text()) or {}).items() if k not in ("defaults", "hydra")}
 
 
-def _extended(path: Path) -> list[Path]:
-    """The files of the same group `path` extends (`defaults: [- default, _self_]`), deepest first."""
-    items = (yaml.safe_load(path.read_text()) or {}).get("defaults", [])
-    bases = [path.with_name(f"{i}.yaml") for i in items if isinstance(i, str) and i != "_self_"
-             and path.with_name(f"{i}.yaml").is_file()]
-    return [p for b in bases for p in (*_extended(b), b)]
+def _is_global(path: Path) -> bool:
+    return (path.read_text().splitlines() or [""])[0].strip() == "# @package _global_"
+
+
+def _extended(path: Path, package: str) -> list[tuple[Path, str]]:
+    """(file, its package) of the files `path` extends (`defaults: [- default, _self_]` in its group, or
+    `- /<group>/<name>@<package>`), deepest first; a file with a global header keeps the root package."""
+    out = []
+    for item in (yaml.safe_load(path.read_text()) or {}).get("defaults", []):
+        if not isinstance(item, str) or item == "_self_":
+            continue
+        if item.startswith("/"):
+            name, _, pkg = item[1:].partition("@")
+            base, base_package = CONF / f"{name}.yaml", (pkg + "." if pkg else "")
+        else:
+            base, base_package = path.with_name(f"{item}.yaml"), package
+        if base.is_file():
+            base_package = "" if _is_global(base) else base_package
+            out += [*_extended(base, base_package), (base, base_package)]
+    return out
 
 
 def _overlay(base: dict, over: dict) -> dict:
@@ -102,7 +116,7 @@ def _checks() -> list[tuple[Path, str, str, bool]]:
     out = []
     for path in sorted(CONF.rglob("*.yaml")):
         rel = path.relative_to(CONF)
-        glob = (path.read_text().splitlines() or [""])[0].strip() == "# @package _global_"
+        glob = _is_global(path)
         if len(rel.parts) == 1:
             out.append((path, rel.stem, "", False))
         elif rel.parts[0] == "exp":
@@ -111,7 +125,7 @@ def _checks() -> list[tuple[Path, str, str, bool]]:
             app = rel.stem.removeprefix("smoke_")
             out.append((path, app, "study_debug." if app == "study" else "", True))
         elif rel.parts[0] == "study":
-            out.append((path, "study", "study.", False))
+            out.append((path, "study", "" if glob else "study.", False))
         elif rel.parts[0] not in ("debug", "policy"):
             for app in _primaries_using(rel.parts[0])[:1]:  # the group's type is the same in every entry point
                 out.append((path, app, "" if glob else rel.parts[0] + ".", False))
@@ -130,8 +144,8 @@ def test_no_yaml_file_restates_what_lies_beneath_it(path, app, package, overlay)
             reference = OmegaConf.to_container(compose(app), resolve=False)
     else:
         reference = _defaults(SCHEMAS[app])
-        for base in _extended(path):
-            reference = _overlay(reference, _nest(package, _body(base)))
+        for base, base_package in _extended(path, package):
+            reference = _overlay(reference, _nest(base_package, _body(base)))
     values = {k: v for k, v in _nest(package, _body(path)).items() if k != "policy"}  # a plain mapping: see above
     found = restatements(values, reference, str(path.relative_to(CONF)))
     assert not found, ("these values are what the file gets anyway (the dataclass default, or the file beneath "
