@@ -20,6 +20,7 @@ import numpy as np
 
 from planners import NavMesh
 from wanderland_nav.atomic import atomic_path
+from wanderland_nav.episodes.schema import load_episodes
 from wanderland_nav.grounding_study.plan import MANIFEST
 from wanderland_nav.scene.loader import load_scene
 from wanderland_nav.viz.topdown import navmesh_triangles_nav
@@ -37,13 +38,10 @@ def grounded_source(out: Path) -> tuple[Path, Path]:
 
 
 def _routes(path: Path | None, split: str = "test") -> list[np.ndarray]:
-    """Scene-frame expert paths `[P, 3]` of an episodes file's `split` (a study routes file has one split)."""
+    """Scene-frame expert paths `[P, 3]` of an episodes file's `split` (none without a file)."""
     if path is None or not path.exists():
         return []
-    data = json.loads(path.read_text())
-    eps = data["episodes"] if isinstance(data, dict) else data
-    keep = [e for e in eps if e.get("split", split) == split]
-    return [np.asarray(e["reference_path"], dtype=np.float64) for e in keep if e.get("reference_path")]
+    return [np.asarray(e.reference_path, dtype=np.float64) for e in load_episodes(path, split=split)]
 
 
 def main(argv=None) -> Path:
@@ -70,7 +68,7 @@ def main(argv=None) -> Path:
         nav = NavMesh.load(folder / "navmesh.npz")
         tri = navmesh_triangles_nav(nav, R)
         paths = [p @ R.T for p in _routes(routes_file)]
-        panels.append((name, tri, paths, nav.area, len(nav.islands), len(_routes(routes_file))))
+        panels.append((name, tri, paths, nav.area, len(nav.islands), len(paths)))
     lo = np.min([t[:, :, :2].reshape(-1, 2).min(0) for _, t, *_ in panels if t is not None and len(t)], axis=0)
     hi = np.max([t[:, :, :2].reshape(-1, 2).max(0) for _, t, *_ in panels if t is not None and len(t)], axis=0)
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.6), squeeze=False)
