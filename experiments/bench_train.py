@@ -81,7 +81,7 @@ def bench_policy(name: str, frames: int, minibatch: int, actor_batch: int) -> di
     return {"policy": name, "params_M": params / 1e6, "actor_fps": actor_fps, "learner_fps": learner_fps}
 
 
-def bench_env(name: str, iterations: int, batch: int) -> dict:
+def bench_env(name: str, iterations: int, batch: int, lod_px: float) -> dict:
     from wanderland_nav.compose import env_factory, load_navmesh, scene_gaussians
     from wanderland_nav.envs import NavEnvConfig
     from wanderland_nav.preparation.scene import ensure_demo_scene
@@ -96,7 +96,7 @@ def bench_env(name: str, iterations: int, batch: int) -> dict:
     cfg.camera.history = policy.context
     cfg.kinematics.num_waypoints = policy.num_waypoints
     cfg.termination.max_steps = 120
-    g = scene_gaussians(scene, 10000)
+    g = scene_gaussians(scene, lod_px)
     fpb = batch * 25
 
     class Quiet:
@@ -128,6 +128,8 @@ def main():
     ap.add_argument("--minibatch", type=int, default=100)
     ap.add_argument("--actor-batch", type=int, default=8)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--lod-px", type=float, default=2.0,
+                    help="the camera's level-of-detail cut in pixels (the main job's: 2)")
     ap.add_argument("--env", action="store_true")
     ap.add_argument("--env-iterations", type=int, default=2)
     a = ap.parse_args()
@@ -140,7 +142,7 @@ def main():
     if a.env:
         print(f"{'policy':<11} {'env B':>6} {'collect f/s':>12} {'loop f/s':>9}")
         for name in a.policies:
-            r = bench_env(name, a.env_iterations, a.actor_batch)
+            r = bench_env(name, a.env_iterations, a.actor_batch, a.lod_px)
             print(f"{r['policy']:<11} {r['env_batch']:>6} {r['collect_fps']:>12.2f} {r['loop_fps']:>9.2f}")
 
 

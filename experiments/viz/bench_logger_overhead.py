@@ -82,6 +82,8 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=4)
     ap.add_argument("--steps", type=int, default=16, help="env steps per agent per PPO iteration")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--lod-px", type=float, default=2.0,
+                    help="the camera's level-of-detail cut in pixels (the main job's: 2)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -97,7 +99,7 @@ def main() -> None:
     if not episodes.is_file():
         write_scene_episodes(scene, NavMesh.load(scene.navmesh_path), episodes, num_episodes=40, seed=0,
                              settings=GeneratorSettings(goal_images=False))
-    g = scene_gaussians(scene, 10000)  # training's LOD subset
+    g = scene_gaussians(scene, args.lod_px)  # the camera's hierarchy cut
     cfg = NavEnvConfig()
     cfg.camera.height = cfg.camera.width = 64
     cfg.camera.history = 2

@@ -191,3 +191,27 @@ def test_the_paper_study_at_smoke_size_runs_every_part_and_resumes(tmp_path, mon
     assert json.loads((tmp_path / "out" / MANIFEST).read_text()) == manifest  # nothing ran again
     for part in ("main_job", "pedestrians", "task_families"):
         assert again[part].read_text().split("\n", 1)[1] == written[part].read_text().split("\n", 1)[1]
+
+
+def test_failure_tables_split_sr_by_route_length_indoors_and_outdoors_and_fail_on_unshared_episodes(tmp_path):
+    from experiments.benchmark.failures import length_table
+
+    def seed(ok):  # 9 routes of 1..9 m; the first 3 indoor (the `_bench_folder` layout has 4 indoor of 10)
+        records = [{**r, "shortest_length": float(i + 1), "environment": "indoor" if i < 3 else "outdoor"}
+                   for i, r in enumerate(_records(ok, 0))]
+        return {"imagegoal/nomad_imagegoal_rl_bc": records, "imagegoal/random": records}
+
+    short_only = [True] * 3 + [False] * 6  # succeeds on the three shortest (indoor) routes only
+    text = length_table({0: seed(short_only), 1: seed(short_only)})
+    head, row = text.splitlines()[:2]
+    assert head.split()[1:] == ["indoor", "1.0-3.7", "m", "indoor", "3.7-6.3", "m", "indoor", "6.3-9.0", "m",
+                                "outdoor", "1.0-3.7", "m", "outdoor", "3.7-6.3", "m", "outdoor", "6.3-9.0", "m"]
+    assert "random" not in text  # trained rows only
+    # indoors only the shortest third has routes (all 3 won in both seeds); outdoors the other two (all lost)
+    assert row.split("  ")[0] == "imagegoal/nomad_imagegoal_rl_bc"
+    cells = [c.strip() for c in row.split("  ")[1:] if c.strip()]
+    assert cells == ["1.00 [0.61, 1.00] n=3", "-", "-", "-", "0.00 [0.00, 0.39] n=3", "0.00 [0.00, 0.39] n=3"]
+    bad = seed(short_only)
+    bad["imagegoal/nomad_imagegoal_rl_bc"] = bad["imagegoal/nomad_imagegoal_rl_bc"][::-1]
+    with pytest.raises(ValueError, match="do not share their episodes"):
+        length_table({0: seed(short_only), 1: bad})

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Sequence
 
 from wanderland_nav.atomic import atomic_write_text
 from wanderland_nav.cache import Ledger
@@ -174,10 +174,12 @@ def bench_records(folder: Path) -> dict[str, list[dict]]:
             if e.get("status") == "done"}
 
 
-def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random") -> str:
+def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random",
+                       columns: Sequence[str] = TABLE_COLUMNS) -> str:
     """The task families pooled over seeds: every `<task>/<policy>` evaluation the benchmark cells share, overall
     and indoor / outdoor, each trained policy paired against `baseline` on its task and against the point-goal
-    policy (the main job's BC on the route task) over the same routes and seeds. `seeds`: seed -> benchmark folder."""
+    policy (the main job's BC on the route task) over the same routes and seeds. `seeds`: seed -> benchmark folder;
+    `columns`: the table's (`evaluation.tables`: e.g. the IR_<cause> split)."""
     per_seed = {seed: bench_records(folder) for seed, folder in seeds.items()}
     jobs = [j for j in next(iter(per_seed.values())) if all(j in recs for recs in per_seed.values())]
     pointgoal = next((j for j in jobs if j.endswith(f"/{POINTGOAL_EXP}_bc")), None)
@@ -193,7 +195,7 @@ def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random") -> s
                  if j.endswith("_bc") and f"{j.split('/')[0]}/{baseline}" in rows]
         pairs += [(j, pointgoal) for j in rows if j.endswith("_bc") and pointgoal in rows and j != pointgoal]
         out.append(f"## seeds {', '.join(map(str, seeds))} pooled, {group} routes\n\n"
-                   f"{seed_table(rows, None, TABLE_COLUMNS, pairs=pairs)}")
+                   f"{seed_table(rows, None, columns, pairs=pairs)}")
     return "\n\n".join(out)
 
 
