@@ -21,10 +21,12 @@ def evaluate(scene, navmesh, batch: int, exact: bool):
     from wanderland_nav.envs import ExpertPolicy, NavEnvConfig
     from wanderland_nav.evaluation.loop import run_evaluation
     from wanderland_nav.envs.factory import make_nav_env
+    from wanderland_nav.episodes import load_episodes
 
     cfg = NavEnvConfig()
     cfg.camera.enabled = False
-    env = make_nav_env(scene, config=cfg, batch_size=batch, navmesh=navmesh, seed=0)
+    cfg.goal_image = "none"  # the expert reads no goal view (the episodes may name goal-image files)
+    env = make_nav_env(scene, load_episodes(scene.episodes_path), navmesh, config=cfg, batch_size=batch, seed=0)
     if exact:
         env.step_field = env.field
     res = run_evaluation(env, ExpertPolicy(env), name="exact" if exact else "raster")
