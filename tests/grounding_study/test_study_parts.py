@@ -161,12 +161,16 @@ def test_task_family_tables_pool_the_seeds_and_pair_each_task_with_random_and_th
     for seed in (0, 1):
         seeds[seed] = _bench_folder(tmp_path / f"s{seed}", {
             "pointgoal(route)/random": [False] * 10, "pointgoal(route)/citywalker_rl_bc": [True] * 9 + [False],
-            "imagegoal/random": [False] * 10, "imagegoal/nomad_imagegoal_rl_bc": [True] * 2 + [False] * 8})
+            "imagegoal/random": [False] * 10, "imagegoal/nomad_imagegoal_rl_bc": [True] * 2 + [False] * 8,
+            "instruction/instruction_rl_bc": [True] * 5 + [False] * 5})
     text = task_family_tables(seeds)
     pooled = text.split("## seeds 0, 1 pooled, indoor routes")[0]
     row = next(line for line in pooled.splitlines() if line.startswith("imagegoal/nomad_imagegoal_rl_bc - pointgoal"))
     assert "-0.700" in row  # SR 0.2 - 0.9 over the same 10 routes and 2 seeds
     assert any(line.startswith("pointgoal(route)/citywalker_rl_bc - pointgoal(route)/random") for line in pooled.splitlines())
+    row = next(line for line in pooled.splitlines()
+               if line.startswith("imagegoal/nomad_imagegoal_rl_bc - instruction/instruction_rl_bc"))
+    assert "-0.300" in row  # the two non-point-goal tasks against each other: 0.2 - 0.5
     indoor = text.split("indoor routes")[1].split("## ")[0]
     assert "over 4 episodes x 2 seeds" in indoor  # the 4 indoor routes of each seed
     assert "outdoor routes" in text

@@ -177,8 +177,9 @@ def bench_records(folder: Path) -> dict[str, list[dict]]:
 def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random",
                        columns: Sequence[str] = TABLE_COLUMNS) -> str:
     """The task families pooled over seeds: every `<task>/<policy>` evaluation the benchmark cells share, overall
-    and indoor / outdoor, each trained policy paired against `baseline` on its task and against the point-goal
-    policy (the main job's BC on the route task) over the same routes and seeds. `seeds`: seed -> benchmark folder;
+    and indoor / outdoor, each trained policy paired against `baseline` on its task, against the point-goal
+    policy (the main job's BC on the route task) and against the other tasks' trained policies, over the same
+    routes and seeds. `seeds`: seed -> benchmark folder;
     `columns`: the table's (`evaluation.tables`: e.g. the IR_<cause> split)."""
     per_seed = {seed: bench_records(folder) for seed, folder in seeds.items()}
     jobs = [j for j in next(iter(per_seed.values())) if all(j in recs for recs in per_seed.values())]
@@ -194,6 +195,8 @@ def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random",
         pairs = [(j, f"{j.split('/')[0]}/{baseline}") for j in rows
                  if j.endswith("_bc") and f"{j.split('/')[0]}/{baseline}" in rows]
         pairs += [(j, pointgoal) for j in rows if j.endswith("_bc") and pointgoal in rows and j != pointgoal]
+        others = [j for j in rows if j.endswith("_bc") and j != pointgoal]
+        pairs += [(a, b) for i, a in enumerate(others) for b in others[i + 1:]]  # e.g. image-goal - instruction
         out.append(f"## seeds {', '.join(map(str, seeds))} pooled, {group} routes\n\n"
                    f"{seed_table(rows, None, columns, pairs=pairs)}")
     return "\n\n".join(out)
