@@ -198,7 +198,7 @@ def test_the_paper_study_at_smoke_size_runs_every_part_and_resumes(tmp_path, mon
 
 
 def test_failure_tables_split_sr_by_route_length_indoors_and_outdoors_and_fail_on_unshared_episodes(tmp_path):
-    from experiments.benchmark.failures import length_table
+    from experiments.benchmark.failures import length_chart, length_table
 
     def seed(ok):  # 9 routes of 1..9 m; the first 3 indoor (the `_bench_folder` layout has 4 indoor of 10)
         records = [{**r, "shortest_length": float(i + 1), "environment": "indoor" if i < 3 else "outdoor"}
@@ -215,6 +215,8 @@ def test_failure_tables_split_sr_by_route_length_indoors_and_outdoors_and_fail_o
     assert row.split("  ")[0] == "imagegoal/nomad_imagegoal_rl_bc"
     cells = [c.strip() for c in row.split("  ")[1:] if c.strip()]
     assert cells == ["1.00 [0.61, 1.00] n=3", "-", "-", "-", "0.00 [0.00, 0.39] n=3", "0.00 [0.00, 0.39] n=3"]
+    png = length_chart({0: seed(short_only), 1: seed(short_only)}, tmp_path / "by_length.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = seed(short_only)
     bad["imagegoal/nomad_imagegoal_rl_bc"] = bad["imagegoal/nomad_imagegoal_rl_bc"][::-1]
     with pytest.raises(ValueError, match="do not share their episodes"):
