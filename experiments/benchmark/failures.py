@@ -8,8 +8,8 @@ prints two tables over the seeds every cell shares:
 
 1. `grounding_study.parts.task_family_tables` with the failure columns: IR_<cause> (the share of episodes ended by
    that rule, `evaluation.metrics.INTERVENTION_CAUSES`; they sum to IR), timeout (the share that ran out of steps),
-   collisions, path length and steps; overall, indoor and outdoor, each trained policy paired against random and
-   against the point-goal policy.
+   collisions, path length and steps; overall, indoor and outdoor, each trained policy paired against random, the
+   point-goal policy and the other tasks' trained policies.
 2. SR by route length: the test routes cut at the tertiles of their geodesic length, SR [95 % interval] of every
    trained policy in each third, indoors and outdoors, with the episode count of each cell; so an indoor / outdoor
    gap can be read at matched route lengths (`--png`: the same as a bar chart).
@@ -57,6 +57,8 @@ def length_estimates(per_seed: dict[int, dict[str, list[dict]]], bins: int = 3):
     which = torch.bucketize(length, torch.tensor(edges[1:-1], dtype=torch.float64), right=True)
     env = [r.get("environment") for r in first]
     labels = [f"{edges[b]:.1f}-{edges[b + 1]:.1f} m" for b in range(bins)]
+    masks = {(g, b): torch.tensor([e == g and int(w) == b for e, w in zip(env, which)]) for g in GROUPS
+             for b in range(bins)}  # the same routes for every row
     found: dict[str, dict[str, dict[str, tuple]]] = {g: {lab: {} for lab in labels} for g in GROUPS}
     for job in jobs:
         runs = [per_seed[s][job] for s in seeds]
@@ -65,7 +67,7 @@ def length_estimates(per_seed: dict[int, dict[str, list[dict]]], bins: int = 3):
         ok = torch.tensor([[float(r["success"]) for r in run] for run in runs], dtype=torch.float64)
         for g in GROUPS:
             for b, lab in enumerate(labels):
-                keep = torch.tensor([e == g and int(w) == b for e, w in zip(env, which)])
+                keep = masks[g, b]
                 if int(keep.sum()):
                     found[g][lab][job] = (rate_interval(ok[:, keep]), int(keep.sum()))
     return edges, found
