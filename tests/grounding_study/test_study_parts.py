@@ -9,6 +9,7 @@ import pytest
 
 from wanderland_nav.cache import Ledger
 from wanderland_nav.compose.cli import compose_config
+from wanderland_nav.compose.study_config import TaskFamilyPart
 from wanderland_nav.compose.schema import study_config
 from wanderland_nav.grounding_study.parts import people_tables, plan_part_cells, task_family_tables
 from wanderland_nav.grounding_study.plan import MANIFEST, cell_digests, run_cells
@@ -32,7 +33,17 @@ def test_the_paper_study_plans_every_part_with_its_needs():
     assert [x.env for x in people] == ["people0", "people10", "people30"]
     assert all(x.needs == ("main/grounded/seed3",) for x in people)
     bench = [x for x in parts["task_families"] if x.kind == "bench" and x.seed == 1][0]
-    assert bench.needs == ("main/grounded/seed1", "tasks/nomad_imagegoal_rl/seed1", "tasks/instruction_rl/seed1")
+    # the paper's task families on the district: all three policies trained there alike, no main-job cell needed
+    assert bench.needs == ("tasks/citywalker_rl/seed1", "tasks/nomad_imagegoal_rl/seed1", "tasks/instruction_rl/seed1")
+    assert "scene=district" in c.study.task_families.train and "scene=district" in c.study.task_families.benchmark
+    assert list(plan_part_cells(_config("study.parts=[task_families]").study)) == ["task_families"]
+    # on the demo block the point-goal row is the main job's BC, whose cells are planned for it
+    demo = _config("study.parts=[task_families]", "+study/task_families@study.task_families=demo").study
+    assert demo.task_families == TaskFamilyPart()
+    parts = plan_part_cells(demo)
+    assert list(parts) == ["main_job", "task_families"]
+    assert parts["task_families"][2].needs == ("main/grounded/seed0", "tasks/nomad_imagegoal_rl/seed0",
+                                               "tasks/instruction_rl/seed0")
     smoke = _config("debug=smoke")
     assert smoke.study.part_overrides == ["debug=smoke"] and smoke.study.seeds == [0]
     # only a part that needs the main job: its cells are planned anyway
@@ -52,7 +63,13 @@ def test_a_part_setting_moves_only_that_parts_cells():
     # the main job's recipe moves the main cells and everything that evaluates them
     retrained = cell_digests(_config("study.main_job.train=['+exp=citywalker_rl','algo.ppo.lr=1e-4']"), cells)
     changed = {k for k in before if before[k] != retrained[k]}
-    assert changed == {x.key for x in cells if x.kind in ("main", "people", "bench")}
+    assert changed == {x.key for x in cells if x.kind in ("main", "people")}  # the district task families own theirs
+    demo = ["+study/task_families@study.task_families=demo"]
+    c = _config(*demo)
+    _, cells = _part_cells(c)
+    before = cell_digests(c, cells)
+    retrained = cell_digests(_config(*demo, "study.main_job.train=['+exp=citywalker_rl','algo.ppo.lr=1e-4']"), cells)
+    assert {k for k in before if before[k] != retrained[k]} == {x.key for x in cells if x.kind in ("main", "people", "bench")}
 
 
 def _fake(calls, fail=()):

@@ -49,10 +49,12 @@ class PedestrianPart:
 
 @dataclass
 class TaskFamilyPart:
-    """`study.task_families`: per seed, one `train` run per experiment (the point-goal one is the main job's) and
-    one benchmark over their BC checkpoints (the tasks each fits)."""
+    """`study.task_families`: per seed, one `train` run per experiment and one benchmark over their BC checkpoints
+    (the tasks each fits). The point-goal row is the main job's BC, or with `pointgoal` set that experiment trained
+    as one more of these runs (so all three policies share `train`: e.g. a district, conf/study/task_families/)."""
 
     exps: List[str] = field(default_factory=lambda: ["nomad_imagegoal_rl", "instruction_rl"])
+    pointgoal: Optional[str] = None  # null: the main job's BC (its cells); an experiment: trained with `train`
     train: List[str] = field(default_factory=lambda: ["algo.ppo.enabled=false"])  # the table compares BC phases
     benchmark: List[str] = field(default_factory=lambda: ["scene.preset=tiny", "split=test", "num_episodes=null",
                                                           "pointgoal_input=route", "batch_size=25", "baseline=random"])

@@ -6,9 +6,11 @@ Each cell is one entry point's command, composed here with `study.<part>` overri
 
 * `main/grounded/seed<s>`: `train` + `study.main_job.train` + `seed=s` (BC, then PPO: the main job);
 * `people/people<N>/seed<s>`: `evaluate checkpoints=[<main>/bc.pt, <main>/last.pt] env/pedestrians=crowd env.pedestrians.count=N`;
-* `tasks/<exp>/seed<s>`: `train +exp=<exp>` + `study.task_families.train` (an image-goal or instruction policy);
-* `bench/grounded/seed<s>`: `benchmark` over the BC checkpoints of the main job and those runs, each on the tasks
-  it fits, beside the expert, random and straight-line references.
+* `tasks/<exp>/seed<s>`: `train +exp=<exp>` + `study.task_families.train` (an image-goal or instruction policy,
+  and the point-goal one when `study.task_families.pointgoal` names it);
+* `bench/grounded/seed<s>`: `benchmark` over the BC checkpoints of the point-goal policy (the main job's unless
+  `pointgoal` is set) and those runs, each on the tasks it fits, beside the expert, random and straight-line
+  references.
 
 Each part writes its tables under `<out>/<part>/table.txt` (`write_part_tables`) from the cells done so far.
 """
@@ -30,7 +32,7 @@ from wanderland_nav.grounding_study.plan import GROUNDED, Cell, cell_digests
 log = logging.getLogger("wanderland_nav.study")
 
 PEOPLE_NAMES = ("BC", "BC+RL")  # the main job's checkpoints the pedestrian cells evaluate, in this order
-POINTGOAL_EXP = "citywalker_rl"  # the main job's policy: the point-goal row of the task-family table
+POINTGOAL_EXP = "citywalker_rl"  # the main job's policy: the point-goal row of the task-family table by default
 
 
 def _check(s: StudyGroup) -> None:
@@ -50,16 +52,19 @@ def plan_part_cells(s: StudyGroup) -> dict[str, list[Cell]]:
     is asked for: its policies are what the pedestrian and task-family cells evaluate)."""
     _check(s)
     out: dict[str, list[Cell]] = {}
-    if {"main_job", "pedestrians", "task_families"} & set(s.parts):
+    tasks = "task_families" in s.parts
+    if {"main_job", "pedestrians"} & set(s.parts) or (tasks and s.task_families.pointgoal is None):
         out["main_job"] = [main_cell(seed) for seed in s.seeds]
     if "pedestrians" in s.parts:
         out["pedestrians"] = [Cell("people", f"people{int(n)}", seed, needs=(main_cell(seed).key,))
                               for seed in s.seeds for n in s.pedestrians.counts]
-    if "task_families" in s.parts:
+    if tasks:
+        pointgoal = s.task_families.pointgoal
         cells = []
         for seed in s.seeds:
-            runs = [Cell("tasks", exp, seed) for exp in s.task_families.exps]
-            cells += [*runs, Cell("bench", GROUNDED, seed, needs=(main_cell(seed).key, *(r.key for r in runs)))]
+            runs = [Cell("tasks", exp, seed) for exp in ([pointgoal] if pointgoal else []) + list(s.task_families.exps)]
+            first = () if pointgoal else (main_cell(seed).key,)
+            cells += [*runs, Cell("bench", GROUNDED, seed, needs=(*first, *(r.key for r in runs)))]
         out["task_families"] = cells
     return out
 
@@ -104,7 +109,7 @@ class PartCells:
             rows = self.entries["evaluate"](cfg)
             return {"people": n, "rows": {k: {m: v[m] for m in ("SR", "IR") if m in v} for k, v in rows.items()}}
         if cell.kind == "bench":
-            names = [POINTGOAL_EXP, *s.task_families.exps]
+            names = [POINTGOAL_EXP if key.startswith("main/") else self.cells[key].env for key in cell.needs]
             policies = [{"name": "expert", "reference": "expert"}, {"name": "random", "reference": "random"},
                         {"name": "straight", "target": "wanderland_nav.external.examples:GoalVectorPolicy"}]
             policies += [{"name": f"{name}_bc", "checkpoint": str(self._checkpoint(key, "bc.pt"))}
@@ -178,12 +183,12 @@ def task_family_tables(seeds: Mapping[int, Path], baseline: str = "random",
                        columns: Sequence[str] = TABLE_COLUMNS) -> str:
     """The task families pooled over seeds: every `<task>/<policy>` evaluation the benchmark cells share, overall
     and indoor / outdoor, each trained policy paired against `baseline` on its task, against the point-goal
-    policy (the main job's BC on the route task) and against the other tasks' trained policies, over the same
+    policy (the trained policy on the route task) and against the other tasks' trained policies, over the same
     routes and seeds. `seeds`: seed -> benchmark folder;
     `columns`: the table's (`evaluation.tables`: e.g. the IR_<cause> split)."""
     per_seed = {seed: bench_records(folder) for seed, folder in seeds.items()}
     jobs = [j for j in next(iter(per_seed.values())) if all(j in recs for recs in per_seed.values())]
-    pointgoal = next((j for j in jobs if j.endswith(f"/{POINTGOAL_EXP}_bc")), None)
+    pointgoal = next((j for j in jobs if j.startswith("pointgoal") and j.endswith("_bc")), None)
     out = []
     for group in ("overall", "indoor", "outdoor"):
         def keep(records):
