@@ -79,7 +79,7 @@ def _is_global(path: Path) -> bool:
 
 def _extended(path: Path, package: str) -> list[tuple[Path, str]]:
     """(file, its package) of the files `path` extends (`defaults: [- default, _self_]` in its group, or
-    `- /<group>/<name>@<package>`), deepest first; a file with a global header keeps the root package."""
+    `- <group>/<name>@<package>`, `- /<group>/<name>@<package>`), deepest first; a file with a global header keeps the root package."""
     out = []
     for item in (yaml.safe_load(path.read_text()) or {}).get("defaults", []):
         if not isinstance(item, str) or item == "_self_":
@@ -87,8 +87,11 @@ def _extended(path: Path, package: str) -> list[tuple[Path, str]]:
         if item.startswith("/"):
             name, _, pkg = item[1:].partition("@")
             base, base_package = CONF / f"{name}.yaml", (pkg + "." if pkg else "")
-        else:
-            base, base_package = path.with_name(f"{item}.yaml"), package
+        else:  # relative to this file's group; `@pkg` is relative to this file's package
+            name, _, pkg = item.partition("@")
+            group = name.rpartition("/")[0].replace("/", ".")
+            base = path.parent / f"{name}.yaml"
+            base_package = package + (pkg + "." if pkg else (group + "." if group else ""))
         if base.is_file():
             base_package = "" if _is_global(base) else base_package
             out += [*_extended(base, base_package), (base, base_package)]
@@ -124,8 +127,8 @@ def _checks() -> list[tuple[Path, str, str, bool]]:
         elif rel.parts[0] == "debug_sizes":
             app = rel.stem.removeprefix("smoke_")
             out.append((path, app, "study_debug." if app == "study" else "", True))
-        elif rel.parts[0] == "study":
-            out.append((path, "study", "" if glob else "study.", False))
+        elif rel.parts[0] == "study":  # a subgroup (study/task_families/) fills the field of its name
+            out.append((path, "study", "" if glob else ".".join(("study", *rel.parts[1:-1])) + ".", False))
         elif rel.parts[0] not in ("debug", "policy"):
             for app in _primaries_using(rel.parts[0])[:1]:  # the group's type is the same in every entry point
                 out.append((path, app, "" if glob else rel.parts[0] + ".", False))

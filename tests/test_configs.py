@@ -67,7 +67,7 @@ def _compositions() -> list[tuple[str, list[str], list[Path]]]:
         jobs.append(("study", [f"+study={opt.stem}"], [opt]))
         jobs.append(("study", [f"+study={opt.stem}", "debug=smoke"], [opt]))
     for opt in sorted((CONF / "study" / "task_families").glob("*.yaml")):  # the paper study's task-family worlds
-        jobs.append(("study", ["+study=paper", f"+study/task_families@study.task_families={opt.stem}"], [opt]))
+        jobs.append(("study", ["+study=paper", f"study/task_families={opt.stem}"], [opt]))
     for e in EXPS:
         exp = CONF / "exp" / f"{e}.yaml"
         jobs.append(("train", [f"+exp={e}"], [exp, *_absolute_defaults(exp)]))

@@ -38,7 +38,7 @@ def test_the_paper_study_plans_every_part_with_its_needs():
     assert "scene=district" in c.study.task_families.train and "scene=district" in c.study.task_families.benchmark
     assert list(plan_part_cells(_config("study.parts=[task_families]").study)) == ["task_families"]
     # on the demo block the point-goal row is the main job's BC, whose cells are planned for it
-    demo = _config("study.parts=[task_families]", "+study/task_families@study.task_families=demo").study
+    demo = _config("study.parts=[task_families]", "study/task_families=demo").study
     assert demo.task_families == TaskFamilyPart()
     parts = plan_part_cells(demo)
     assert list(parts) == ["main_job", "task_families"]
@@ -64,7 +64,7 @@ def test_a_part_setting_moves_only_that_parts_cells():
     retrained = cell_digests(_config("study.main_job.train=['+exp=citywalker_rl','algo.ppo.lr=1e-4']"), cells)
     changed = {k for k in before if before[k] != retrained[k]}
     assert changed == {x.key for x in cells if x.kind in ("main", "people")}  # the district task families own theirs
-    demo = ["+study/task_families@study.task_families=demo"]
+    demo = ["study/task_families=demo"]
     c = _config(*demo)
     _, cells = _part_cells(c)
     before = cell_digests(c, cells)
