@@ -79,7 +79,8 @@ def _is_global(path: Path) -> bool:
 
 def _extended(path: Path, package: str) -> list[tuple[Path, str]]:
     """(file, its package) of the files `path` extends (`defaults: [- default, _self_]` in its group, or
-    `- <group>/<name>@<package>`, `- /<group>/<name>@<package>`), deepest first; a file with a global header keeps the root package."""
+    `- <group>/<name>@<package>`, `- /<group>/<name>@<package>`), deepest first; a file with a global header
+    keeps the root package."""
     out = []
     for item in (yaml.safe_load(path.read_text()) or {}).get("defaults", []):
         if not isinstance(item, str) or item == "_self_":
