@@ -312,3 +312,16 @@ def test_checkpoints_meet_the_evaluations_pedestrians(demo_episodes, tmp_path):
     assert "person_collisions" in row and row["episodes"] == 2
     records, = json.loads((tmp_path / "eval_checkpoints.json").read_text())["records"].values()
     assert [r["pedestrians"] for r in records] == [3, 3]
+
+
+def test_the_same_seed_trains_the_same_weights(demo_episodes, tmp_path):
+    """Two runs of one experiment at one seed, in two folders: bitwise the same BC and BC+RL weights and the same
+    table (the study's cells, and every seed of a results page, rest on it)."""
+    from wanderland_nav.rl.checkpoint import load_checkpoint
+    from wanderland_nav.train import run
+
+    rows = [run(smoke_cfg("citywalker_rl", demo_episodes.parent, tmp_path / name)) for name in ("a", "b")]
+    assert rows[0] == rows[1]
+    for name in ("bc.pt", "last.pt"):
+        a, b = (load_checkpoint(tmp_path / d / "checkpoints" / name)["policy"] for d in ("a", "b"))
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a), name
