@@ -314,6 +314,7 @@ def test_checkpoints_meet_the_evaluations_pedestrians(demo_episodes, tmp_path):
     assert [r["pedestrians"] for r in records] == [3, 3]
 
 
+@pytest.mark.slow
 def test_the_same_seed_trains_the_same_weights(demo_episodes, tmp_path):
     """Two runs of one experiment at one seed, in two folders: bitwise the same BC and BC+RL weights and the same
     table (the study's cells, and every seed of a results page, rest on it)."""
