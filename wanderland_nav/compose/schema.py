@@ -404,7 +404,7 @@ class BenchmarkConfig:
     num_episodes: Optional[int] = at_least(1, None)
     batch_size: int = at_least(1, 8)
     image_size: List[int] = field(default_factory=lambda: [64, 64])  # camera of a policy that names no size
-    lod_px: Optional[float] = 1.0  # one camera for every policy: the faithful cut, whatever cut a policy trained at
+    lod_px: Optional[float] = DEFAULT_LOD_PX  # one camera for every policy: the faithful cut, whatever cut a policy trained at
     timeout_s: float = 30.0
     max_consecutive_failures: int = at_least(1, 3)
     device: str = "cpu"
