@@ -160,6 +160,22 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
 
 
 
+@pytest.mark.parametrize("family", ["mbra", "nomad"])
+def test_a_policy_family_study_trains_that_family_at_every_size(family):
+    from wanderland_nav.compose.cli import compose_config
+
+    full = study_config(compose_config("study", [f"+study=grounding_district_{family}"]))
+    district = study_config(compose_config("study", ["+study=grounding_district"]))
+    assert full.study.train == [*district.study.train, f"policy={family}"]
+    assert (full.study.presets, full.study.seeds) == (district.study.presets, district.study.seeds)
+    smoke = study_config(compose_config("study", [f"+study=grounding_district_{family}", "debug=smoke"]))
+    assert "debug=smoke" in smoke.study.train and smoke.study.train[-1] == f"policy={family}"
+    # a `policy=` already in the recipe is replaced, not doubled (the last override would win silently)
+    swapped = study_config(compose_config("study", [f"+study=grounding_district_{family}",
+                                                    "study.train=['+exp=citywalker_rl','policy=cnn']"]))
+    assert swapped.study.train == ["+exp=citywalker_rl", f"policy={family}"]
+
+
 def test_bc_round_phases_are_fixed_policies_with_their_own_checkpoint(tmp_path):
     from wanderland_nav.grounding_study.cells import StudyCells, phase_checkpoint
 

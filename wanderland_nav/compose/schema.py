@@ -489,7 +489,8 @@ def typed_config(cfg: DictConfig | dict, schema: type):
 
 
 def study_config(cfg) -> StudyConfig:
-    """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study`."""
+    """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study` and the study's
+    `policy` family appended to its `train` recipe."""
     cfg = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
     if cfg.get("study_debug"):
         debug = OmegaConf.to_container(cfg.study_debug)
@@ -499,6 +500,9 @@ def study_config(cfg) -> StudyConfig:
             kept = [o for o in study.ppo_stage if o.split("=", 1)[0].lstrip("+~") not in drop]
             study.ppo_stage = kept or ["algo.ppo.enabled=true"]  # still a stage, so its cells are exercised
         cfg.study = study
+    if cfg.get("study") is not None and cfg.study.get("policy"):  # after the debug sizes: a smoke keeps the family
+        own = [o for o in cfg.study.get("train", []) if o.split("=", 1)[0].lstrip("+~") != "policy"]
+        cfg.study.train = [*own, f"policy={cfg.study.policy}"]
     return typed_config(cfg, StudyConfig)
 
 

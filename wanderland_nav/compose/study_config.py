@@ -69,6 +69,9 @@ class StudyGroup:
     degrade_seed: int = 0  # the seed of the stochastic degradations (drift, holes): one degraded world per preset
     seeds: List[int] = field(default_factory=lambda: [0])  # training seeds (policy init, episodes order, PPO)
     train: List[str] = field(default_factory=lambda: ["+exp=citywalker_rl"])  # `train` overrides: the recipe sizes
+    # the policy family of every train cell (`policy=<name>` appended to `train`); at every size, as a debug size's
+    # `train` replaces the study's: null: the recipe's own policy
+    policy: Optional[str] = None
     # `train` overrides of a separate PPO stage (e.g. the learning recipe's PPO sizes): when set, every train cell
     # gets a `ppo` cell = `train` with `train` + these + init_checkpoint=<the train cell's bc.pt>, and BC+RL is that
     # cell's policy. The train cells (BC, and their own PPO, then unused) keep their hash, so a study re-runs only
