@@ -159,7 +159,6 @@ def test_smoke_sizes_merge_over_the_study_group_and_typos_fail():
         study_config(compose_config("study", ["+study=grounding", "+study.eval_episode=3"]))
 
 
-
 @pytest.mark.parametrize("family", ["mbra", "nomad"])
 def test_a_policy_family_study_trains_that_family_at_every_size(family):
     from wanderland_nav.compose.cli import compose_config

@@ -488,6 +488,11 @@ def typed_config(cfg: DictConfig | dict, schema: type):
     return obj
 
 
+def _override_key(override: str) -> str:
+    """`+algo.ppo.lr=1` -> `algo.ppo.lr`: the key a Hydra override sets."""
+    return override.split("=", 1)[0].lstrip("+~")
+
+
 def study_config(cfg) -> StudyConfig:
     """The composed config typed, with the `debug=<x>` sizes (`study_debug`) merged over `study` and the study's
     `policy` family appended to its `train` recipe."""
@@ -497,11 +502,11 @@ def study_config(cfg) -> StudyConfig:
         drop = set(debug.pop("ppo_stage_drop", []))
         study = OmegaConf.merge(cfg.get("study") or {}, debug)
         if drop and study.get("ppo_stage"):  # a staged study's PPO at the debug train's sizes: still minutes
-            kept = [o for o in study.ppo_stage if o.split("=", 1)[0].lstrip("+~") not in drop]
+            kept = [o for o in study.ppo_stage if _override_key(o) not in drop]
             study.ppo_stage = kept or ["algo.ppo.enabled=true"]  # still a stage, so its cells are exercised
         cfg.study = study
     if cfg.get("study") is not None and cfg.study.get("policy"):  # after the debug sizes: a smoke keeps the family
-        own = [o for o in cfg.study.get("train", []) if o.split("=", 1)[0].lstrip("+~") != "policy"]
+        own = [o for o in cfg.study.get("train", []) if _override_key(o) != "policy"]
         cfg.study.train = [*own, f"policy={cfg.study.policy}"]
     return typed_config(cfg, StudyConfig)
 
