@@ -25,8 +25,12 @@ def test_a_library_import_leaves_the_process_alone():
                       "wanderland_nav.compose") == "None"
 
 
-def test_an_entry_point_readies_the_process_before_torch_loads():
-    code = "import wanderland_nav.train, torch; assert wanderland_nav.train.main.__module__ == 'wanderland_nav.train'"
+def test_an_entry_point_readies_the_process_before_torch_loads_and_leaves_rerun_unloaded():
+    """rerun is `logger=rerun`'s and the replay's: training, evaluation and the benchmark start without importing
+    it (half a second per process, and a CUDA machine without its wheel can still train)."""
+    code = ("import sys, wanderland_nav.train, torch, wanderland_nav.evaluate, wanderland_nav.benchmark, "
+            "wanderland_nav.viz; assert wanderland_nav.train.main.__module__ == 'wanderland_nav.train'; "
+            "assert 'rerun' not in sys.modules, 'rerun imported'")
     assert _env_after(code) == "PASSIVE"
 
 

@@ -58,7 +58,8 @@ def test_bad_model_entry_is_named(prepared_demo_scene, tmp_path):
         run(cfg)
 
 
-@pytest.mark.parametrize("model,file", [("gnm", "gnm_large.pth"), ("nomad", "nomad.pth")])
+@pytest.mark.parametrize("model,file", [("gnm", "gnm_large.pth"),
+                                        pytest.param("nomad", "nomad.pth", marks=pytest.mark.slow)])  # ~14 s
 def test_released_model_is_a_warm_start_for_ppo(demo_episodes, weights, tmp_path, model, file):
     """PPO from the released weights (NoMaD: through its zero-noise DDPM chain), no BC."""
     from wanderland_nav.train import run as train

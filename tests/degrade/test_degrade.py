@@ -11,7 +11,7 @@ import trimesh
 
 from wanderland_nav.degrade import DegradeSpec, build_degraded_scene, pose_correction, preset
 from wanderland_nav.degrade.damage import fragment_mask, hole_mask
-from wanderland_nav.degrade.metrics import SurfaceDistance, feasible_episodes, surface_metrics
+from wanderland_nav.degrade.metrics import SurfaceDistance, feasible_episodes, surface_distance, surface_metrics
 from wanderland_nav.scene import load_scene
 
 
@@ -103,6 +103,18 @@ def test_surface_distance_is_exact_against_trimesh():
     p = np.random.default_rng(0).normal(0, 2.0, (3000, 3))
     _, ref, _ = trimesh.proximity.closest_point(box, p)
     np.testing.assert_allclose(SurfaceDistance(box, max_edge=0.5)(p), ref, atol=1e-9)
+
+
+def test_a_surface_is_built_once_per_content_and_a_moved_copy_is_its_own():
+    box = trimesh.creation.box(extents=(4.0, 3.0, 2.0))
+    built = surface_distance(box, max_edge=0.5)
+    assert surface_distance(box.copy(), max_edge=0.5) is built  # the same vertices and faces: reused
+    assert surface_distance(box, max_edge=0.25) is not built    # other settings: built again
+    moved = box.copy()
+    moved.apply_translation([0.0, 0.0, 1e-3])
+    p = np.zeros((1, 3))
+    assert surface_distance(moved, max_edge=0.5) is not built
+    assert surface_distance(moved, max_edge=0.5)(p)[0] == pytest.approx(1.0 - 1e-3)  # the moved box, not the cached one
 
 
 def test_surface_metrics_on_known_offsets():

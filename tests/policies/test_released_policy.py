@@ -112,6 +112,7 @@ def test_logonav_goal_is_clipped_and_unit_scaled(tmp_path):
         assert torch.allclose(policy(td.copy())[K.WAYPOINTS], want, atol=1e-5)
 
 
+@pytest.mark.slow  # a full-width LogoNav written and read back (~12 s); the spec from shapes: test_released_visualnav
 def test_logonav_deployment_width_is_built_from_its_file(tmp_path):
     path = _seeded_file("logonav", LogoNavNet(LOGONAV_DEPLOY_CONFIG).eval(), tmp_path)
     assert make_policy("released", model="logonav", weights=str(path)).net.spec == LOGONAV_DEPLOY_CONFIG

@@ -26,7 +26,7 @@ def jobs(tmp_path, ids, n=5):
     return [SceneJob(i, str(tmp_path / i), num_episodes=n) for i in ids]
 
 
-@pytest.mark.parametrize("backend", ["serial", "process"])
+@pytest.mark.parametrize("backend", ["serial", pytest.param("process", marks=pytest.mark.slow)])
 def test_failures_are_collected_and_a_rerun_resumes(tmp_path, backend):
     manifest = tmp_path / "done.json"
     r = run_batch(jobs(tmp_path, ["s1", "bad1", "s2"]), manifest, workers=2, backend=backend, fn=fake_work)
@@ -71,9 +71,10 @@ def test_a_scene_whose_inputs_changed_is_redone_whatever_their_times(tmp_path):
     assert (tmp_path / "s1" / "calls").read_text() == "2"
 
 
-def test_process_backend_runs_in_worker_processes(tmp_path):
-    r = run_batch(jobs(tmp_path, ["a", "b"]), tmp_path / "d.json", workers=2, backend="process", fn=fake_work)
+def test_process_backend_runs_in_worker_processes_and_collects_their_failures(tmp_path):
+    r = run_batch(jobs(tmp_path, ["a", "bad1", "b"]), tmp_path / "d.json", workers=2, backend="process", fn=fake_work)
     assert os.getpid() not in {d["pid"] for d in r.done.values()}
+    assert set(r.done) == {"a", "b"} and "RuntimeError: broken scene bad1" in r.failed["bad1"]
 
 
 def test_bad_manifest_is_named(tmp_path):
@@ -91,6 +92,7 @@ def test_demo_set_jobs_carry_their_seeds(tmp_path):
                                                                       ("demo_seed_5", 5, "tiny")]
 
 
+@pytest.mark.slow  # a local Ray start (~15 s idle), like every other Ray start in the tests
 def test_ray_backend_collects_failures(tmp_path):
     ray = pytest.importorskip("ray")
     here = str(Path(__file__).parent)  # Ray workers must import fake_work from this test module
