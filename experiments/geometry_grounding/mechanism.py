@@ -2,6 +2,7 @@
 by intervention cause, collisions and path length, paired over the same seeds and episodes.
 
     python experiments/geometry_grounding/mechanism.py <the study's out>        (e.g. outputs/study/paper)
+    python experiments/geometry_grounding/mechanism.py <the study's out> --train-cells
 
 Reads the study's done-manifest and the per-episode records of every evaluation in the grounded world of a
 policy trained there or in a degraded world (`eval/grounded/seed<S>/<world>:<phase>` cells, the Table-3 rows),
@@ -9,6 +10,10 @@ and prints one seed table (`evaluation.tables.seed_table`: mean over seeds x epi
 the rows each world's BC+RL - BC and each degraded world's policy - the grounded one's. IR_<cause> is the share of
 episodes ended by that rule (`evaluation.metrics.INTERVENTION_CAUSES`; they sum to IR). Only seeds present for
 every row are used, and they are named.
+
+`--train-cells` reads the grounded train cells instead: each is the main job, whose own before / after table
+evaluates the untrained, BC and BC+RL policies (and the blank-camera rows) on the grounded test split, so the
+grounded half of the table is there as soon as those cells are done, before any evaluation cell.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from wanderland_nav.evaluation.tables import seed_table
 
 COLUMNS = ("SR", "IR", "IR_stuck", "IR_no_progress", "IR_off_navmesh", "collisions", "path_length", "steps")
 KEY = re.compile(r"eval/grounded/seed(\d+)/([^:@]+):([^@]+)$")
+TRAIN_KEY = re.compile(r"train/grounded/seed(\d+)$")
 
 
 def grounded_rows(out: Path) -> tuple[dict[str, list[list[dict]]], list[int]]:
@@ -47,10 +53,34 @@ def grounded_rows(out: Path) -> tuple[dict[str, list[list[dict]]], list[int]]:
     return {r: [found[r][s] for s in seeds] for r in order}, seeds
 
 
+def train_cell_rows(out: Path) -> tuple[dict[str, list[list[dict]]], list[int]]:
+    """row name (the main job's: untrained, BC, BC+RL, ... blank camera) -> per-seed records of the done grounded
+    train cells, and their seeds."""
+    manifest = json.loads((out / MANIFEST).read_text())
+    by_seed = {int(m[1]): Path(e["dir"]) / "results.json" for k, e in manifest.items()
+               if (m := TRAIN_KEY.match(k)) and e.get("status") == "done"}
+    if not by_seed:
+        raise SystemExit(f"{out / MANIFEST}: no grounded train cell is done yet")
+    seeds = sorted(by_seed)
+    results = [json.loads(by_seed[s].read_text()) for s in seeds]
+    names = [n for n in results[0] if all(n in r for r in results)]
+    return {n: [r[n]["records"] for r in results] for n in names}, seeds
+
+
 def main(argv=None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="the study's out folder")
+    ap.add_argument("--train-cells", action="store_true",
+                    help="the grounded train cells' own before / after rows instead of the evaluation cells")
     a = ap.parse_args(argv)
+    if a.train_cells:
+        rows, seeds = train_cell_rows(a.out)
+        pairs = [(n, "BC") for n in ("BC+RL", "BC blank camera") if n in rows and "BC" in rows]
+        pairs += [("BC+RL blank camera", "BC+RL")] if "BC+RL blank camera" in rows and "BC+RL" in rows else []
+        text = (f"the grounded train cells' own evaluation on the grounded test split; seeds {seeds}\n"
+                + seed_table(rows, columns=COLUMNS, pairs=pairs))
+        print(text)
+        return text
     rows, seeds = grounded_rows(a.out)
     worlds = sorted({r.rsplit(" ", 1)[0] for r in rows})
     pairs = [(f"{w} BC+RL", f"{w} BC") for w in worlds if f"{w} BC+RL" in rows and f"{w} BC" in rows]
