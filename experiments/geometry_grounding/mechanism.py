@@ -75,19 +75,19 @@ def main(argv=None) -> str:
     a = ap.parse_args(argv)
     if a.train_cells:
         rows, seeds = train_cell_rows(a.out)
-        pairs = [(n, "BC") for n in ("BC+RL", "BC blank camera") if n in rows and "BC" in rows]
-        pairs += [("BC+RL blank camera", "BC+RL")] if "BC+RL blank camera" in rows and "BC+RL" in rows else []
-        text = (f"the grounded train cells' own evaluation on the grounded test split; seeds {seeds}\n"
-                + seed_table(rows, columns=COLUMNS, pairs=pairs))
-        print(text)
-        return text
+        pairs = [p for p in (("BC+RL", "BC"), ("BC blank camera", "BC"), ("BC+RL blank camera", "BC+RL"))
+                 if p[0] in rows and p[1] in rows]
+        return _show(f"the grounded train cells' own evaluation on the grounded test split; seeds {seeds}", rows, pairs)
     rows, seeds = grounded_rows(a.out)
     worlds = sorted({r.rsplit(" ", 1)[0] for r in rows})
     pairs = [(f"{w} BC+RL", f"{w} BC") for w in worlds if f"{w} BC+RL" in rows and f"{w} BC" in rows]
     pairs += [(f"{w} {p}", f"grounded {p}") for w in worlds if w != "grounded" for p in ("BC", "BC+RL")
               if f"{w} {p}" in rows and f"grounded {p}" in rows]
-    text = (f"policies trained in <world>, evaluated in the grounded world's test split; seeds {seeds}\n"
-            + seed_table(rows, columns=COLUMNS, pairs=pairs))
+    return _show(f"policies trained in <world>, evaluated in the grounded world's test split; seeds {seeds}", rows, pairs)
+
+
+def _show(title: str, rows: dict[str, list[list[dict]]], pairs: list[tuple[str, str]]) -> str:
+    text = f"{title}\n" + seed_table(rows, columns=COLUMNS, pairs=pairs)
     print(text)
     return text
 

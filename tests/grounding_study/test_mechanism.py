@@ -29,7 +29,7 @@ def _study(tmp_path, done_seeds, running_seed):
     (tmp_path / MANIFEST).write_text(json.dumps(manifest))
 
 
-def test_train_cells_give_the_grounded_rows_of_the_done_seeds(tmp_path, capsys):
+def test_train_cells_give_the_grounded_rows_of_the_done_seeds(tmp_path):
     from experiments.geometry_grounding import mechanism
 
     _study(tmp_path, done_seeds=[0, 1], running_seed=2)
